@@ -1,0 +1,41 @@
+# The two commands of the README: `make run` and `make test` (plus `make bench`).
+# Each first sets up .venv/ (idempotently) from requirements.txt and this package.
+
+PYTHON ?= python3
+VENV := $(CURDIR)/.venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+# colcon and the tools it starts must be the venv's; ROS wheels need nothing sourced.
+ENV := PATH="$(VENV)/bin:$$PATH"
+# colcon's own folders are hidden so that the linters, which skip dot-folders, do not lint
+# the copies of the sources it makes there.
+COLCON := $(ENV) colcon --log-base .colcon/log
+COLCON_PATHS := --paths $(CURDIR) --build-base .colcon/build --install-base .colcon/install
+RUN_ARGS ?=
+
+.PHONY: setup run test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): requirements.txt setup.py setup.cfg package.xml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+	@# setup.cfg puts console scripts where `ros2 run` looks; put them on the venv's PATH too.
+	cd $(VENV)/bin && ln -sf ../lib/wafer_planner_ros/* .
+	@touch $(STAMP)
+
+run: $(STAMP)
+	$(ENV) $(PY) -m wafer_planner_ros.cli.roadmap $(RUN_ARGS)
+
+test: $(STAMP)
+	$(COLCON) build $(COLCON_PATHS)
+	$(COLCON) test $(COLCON_PATHS) --return-code-on-test-failure \
+		--event-handlers console_direct+ --pytest-args -p no:cacheprovider
+	$(COLCON) test-result --test-result-base .colcon/build --verbose
+
+bench: $(STAMP)
+	$(ENV) $(PY) bench/bench_roadmap.py
+
+clean:
+	rm -rf .colcon

@@ -1,0 +1,30 @@
+"""Install wafer_planner_ros as an ament_python package."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'wafer_planner_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    extras_require={'test': ['pytest', 'hypothesis']},
+    zip_safe=True,
+    maintainer='wafer_planner_ros developers',
+    maintainer_email='wafer-planner@example.com',
+    description='Wafer-transfer robot planner: PRM with certified edges, B-spline trajectories',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'wafer-roadmap = wafer_planner_ros.cli.roadmap:entry_point',
+        ],
+    },
+)

@@ -1,0 +1,42 @@
+"""Fixtures shared by the tests: the cells and their roadmaps."""
+
+from pathlib import Path
+
+import pytest
+
+from wafer_planner_ros.cache import load_or_build
+from wafer_planner_ros.cell import Cell, default_cell_path
+
+CELL_DIR = Path(__file__).resolve().parent / 'cells'
+CELL_FILES = {'default': default_cell_path(), 'pillar': CELL_DIR / 'pillar.yaml',
+              'notched': CELL_DIR / 'notched.yaml'}
+
+
+@pytest.fixture(scope='session', params=sorted(CELL_FILES))
+def cell(request) -> Cell:
+    """Yield each test cell in turn."""
+    return Cell.from_yaml(CELL_FILES[request.param])
+
+
+@pytest.fixture(scope='session')
+def default_cell() -> Cell:
+    """Return the packaged default cell."""
+    return Cell.from_yaml(default_cell_path())
+
+
+@pytest.fixture(scope='session')
+def roadmap_cache(tmp_path_factory) -> Path:
+    """Return a roadmap cache shared by the session (each roadmap is built once)."""
+    return tmp_path_factory.mktemp('roadmaps')
+
+
+@pytest.fixture(scope='session')
+def roadmap(cell, roadmap_cache):
+    """Return the roadmap of each test cell, default settings: 1500 nodes, seed 0."""
+    return load_or_build(cell, cache_dir=roadmap_cache).roadmap
+
+
+@pytest.fixture(scope='session')
+def default_roadmap(default_cell, roadmap_cache):
+    """Return the default-settings roadmap of the default cell."""
+    return load_or_build(default_cell, cache_dir=roadmap_cache).roadmap

@@ -1,0 +1,173 @@
+"""The cell model: the default cell's values and every validation error a user can make."""
+
+import copy
+
+import numpy as np
+import pytest
+from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.errors import CellError
+from wafer_planner_ros.geometry import cross2
+import yaml
+
+
+@pytest.fixture()
+def document():
+    """Return the default cell as a fresh, mutable dict."""
+    return yaml.safe_load(default_cell_path().read_text())
+
+
+def test_default_cell_has_the_spec_values(default_cell):
+    cell = default_cell
+    assert cell.name == 'efem-3lp-2ll'
+    assert cell.boundary.tolist() == [[-0.85, -0.45], [0.85, -0.45], [0.85, 0.45],
+                                      [-0.85, 0.45]]
+    assert cell.obstacles == ()
+    r = cell.robot
+    assert r.base.tolist() == [0.0, 0.0]
+    assert r.joint_names == ('shoulder', 'elbow', 'wrist')
+    assert r.link_lengths.tolist() == [0.36, 0.36, 0.22]
+    assert r.link_radii.tolist() == [0.06, 0.05, 0.035]
+    assert r.wafer_radius == 0.15
+    assert r.limits.position.tolist() == [[-3.14159, 3.14159]] * 3
+    assert r.limits.velocity.tolist() == [4.2, 8.4, 6.3]
+    assert r.limits.acceleration.tolist() == [8.4, 16.8, 12.6]
+    assert r.limits.jerk is None
+    assert r.wafer_acceleration_limit.tolist() == [0.981, 0.981]
+    assert r.wafer_acceleration_norm_limit is None
+    assert sorted(cell.stations) == ['loadlock1', 'loadlock2', 'loadport1', 'loadport2',
+                                     'loadport3']
+
+
+def test_default_stations_reachable_on_both_branches_at_their_poses(default_cell):
+    arm = default_cell.robot.arm
+    for station in default_cell.stations.values():
+        assert sorted(c.elbow for c in station.configs) == [-1, 1]
+        for config in station.configs:
+            assert np.sign(config.q[1]) == config.elbow
+            assert np.allclose(arm.wafer_center(config.q), station.spec['wafer_center'])
+            assert np.isclose(np.cos(arm.heading(config.q) - station.spec['heading']), 1.0)
+            assert default_cell.clearance_model.clearance(config.q)[0] > 0
+
+
+def test_test_cells_cover_obstacles_and_irregular_boundaries(cell):
+    if cell.name == 'efem-pillar':
+        assert len(cell.obstacles) == 2
+        assert [len(c.configs) for c in cell.stations.values()].count(1) == 2  # elbow / joints
+    if cell.name == 'efem-notched':
+        assert np.any(cell.robot.base != 0.0)
+        start, middle, end = cell.boundary, np.roll(cell.boundary, -1, 0), np.roll(
+            cell.boundary, -2, 0)
+        turns = cross2(middle - start, end - middle)
+        assert np.any(turns < 0), 'the notched boundary must have a reflex corner'
+
+
+def test_station_roles_follow_names(default_cell):
+    roles = {name: s.role for name, s in default_cell.stations.items()}
+    assert roles['loadport2'] == 'loadport' and roles['loadlock1'] == 'loadlock'
+
+
+def _set(doc, path, value):
+    keys = path.split('.')
+    node = doc
+    for key in keys[:-1]:
+        node = node[key]
+    if value is _DELETE:
+        del node[keys[-1]]
+    else:
+        node[keys[-1]] = value
+
+
+_DELETE = object()
+
+BAD_VALUES = [
+    # (key path to change, new value, expected path in message, expected reason)
+    ('cell.boundary', [[-0.85, -0.45], [0.85, 0.45], [0.85, -0.45], [-0.85, 0.45]],
+     'cell.boundary', 'self-intersecting'),
+    ('cell.boundary', [[0, 0], [1, 0]], 'cell.boundary', 'at least 3'),
+    ('cell.boundary', [[0, 0], [1, 0], [2, 0]], 'cell.boundary', 'zero area'),
+    ('cell.boundary', [[0, 0], [1, 0], [1, 'x']], 'cell.boundary[2][1]', 'must be a number'),
+    ('cell.obstacles', [[[2, 2], [3, 2], [3, 3]]], 'cell.obstacles[0]', 'outside'),
+    ('robot.link_radii', [0.06, 0.0, 0.035], 'robot.link_radii[1]', 'must be > 0'),
+    ('robot.link_lengths', [-0.36, 0.36, 0.22], 'robot.link_lengths[0]', 'must be > 0'),
+    ('robot.link_lengths', [0.36, 0.36], 'robot.link_lengths', 'list of 3'),
+    ('robot.wafer_radius', 0, 'robot.wafer_radius', 'must be > 0'),
+    ('robot.wafer_radius', float('nan'), 'robot.wafer_radius', 'finite'),
+    ('robot.base', [2.0, 0.0], 'robot.base', 'not inside'),
+    ('robot.joint_names', ['a', 'a', 'b'], 'robot.joint_names', 'unique'),
+    ('robot.joint_limits.velocity', [4.2, 8.4, 0.0], 'robot.joint_limits.velocity[2]',
+     'must be > 0'),
+    ('robot.joint_limits.acceleration', [8.4, 'fast', 12.6],
+     'robot.joint_limits.acceleration[1]', 'must be a number'),
+    ('robot.joint_limits.position', [[1.0, -1.0], [-3, 3], [-3, 3]],
+     'robot.joint_limits.position[0]', 'must be below'),
+    ('robot.joint_limits.jerk', [1.0, -1.0, 1.0], 'robot.joint_limits.jerk[1]', 'must be > 0'),
+    ('robot.wafer_acceleration_limit', [0.981, -1], 'robot.wafer_acceleration_limit[1]',
+     'must be > 0'),
+    ('robot.wafer_acceleration_norm_limit', 0.0, 'robot.wafer_acceleration_norm_limit',
+     'must be > 0'),
+    ('stations.loadport2', {'wafer_center': [1.2, 0.0], 'heading': 0.0}, 'stations.loadport2',
+     'unreachable'),
+    ('stations.loadport2', {'wafer_center': [0.0, 0.35], 'heading': 1.5708},
+     'stations.loadport2', 'in collision (wafer vs boundary, overlap 50.0 mm)'),
+    ('stations.loadlock1', {'joints': [-1.5708, 0.0, 0.0]}, 'stations.loadlock1',
+     'in collision (elbow link vs boundary)'),
+    ('stations.loadlock1', {'joints': [0.0, 4.0, 0.0]}, 'stations.loadlock1.joints[1]',
+     'outside the joint limits'),
+    ('stations.loadport1.elbow', 2, 'stations.loadport1.elbow', 'must be 1 or -1'),
+    ('stations.loadport1.height', 0.3, 'stations.loadport1.height', 'unknown key'),
+    ('robot.colour', 'blue', 'robot.colour', 'unknown key'),
+    ('extra', 1, 'extra', 'unknown key'),
+    ('robot.wafer_radius', _DELETE, 'robot.wafer_radius', 'missing'),
+    ('stations', {}, 'stations', 'non-empty'),
+]
+
+
+@pytest.mark.parametrize('key, value, path, reason', BAD_VALUES,
+                         ids=[f'{b[0]}-{b[3]}' for b in BAD_VALUES])
+def test_every_validation_error_names_the_key_path_and_reason(document, key, value, path,
+                                                              reason):
+    doc = copy.deepcopy(document)
+    _set(doc, key, value)
+    with pytest.raises(CellError) as info:
+        Cell.from_dict(doc)
+    assert info.value.path == path
+    assert reason in info.value.reason
+    assert str(info.value).startswith(f'{path}: ')
+
+
+def test_station_branch_in_collision_is_dropped_unless_demanded(document):
+    # An obstacle on the elbow of loadport1's elbow-down branch (elbow near (-0.27, -0.24)).
+    doc = copy.deepcopy(document)
+    doc['cell']['obstacles'] = [[[-0.30, -0.27], [-0.24, -0.27], [-0.24, -0.21],
+                                 [-0.30, -0.21]]]
+    cell = Cell.from_dict(copy.deepcopy(doc))
+    assert [c.elbow for c in cell.stations['loadport1'].configs] == [1]
+    doc['stations']['loadport1']['elbow'] = -1
+    with pytest.raises(CellError) as info:
+        Cell.from_dict(doc)
+    assert info.value.path == 'stations.loadport1'
+    assert 'in collision' in info.value.reason and 'cell.obstacles[0]' in info.value.reason
+
+
+def test_unreadable_and_malformed_files(tmp_path):
+    with pytest.raises(CellError, match='cannot read'):
+        Cell.from_yaml(tmp_path / 'missing.yaml')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('cell: [unclosed\n')
+    with pytest.raises(CellError, match='not valid YAML'):
+        Cell.from_yaml(bad)
+    bad.write_text('- just\n- a list\n')
+    with pytest.raises(CellError, match='must be a mapping'):
+        Cell.from_yaml(bad)
+
+
+def test_digest_ignores_layout_but_not_values(document, tmp_path):
+    a = Cell.from_dict(copy.deepcopy(document))
+    reordered = {'stations': document['stations'], 'robot': document['robot'],
+                 'cell': document['cell']}
+    path = tmp_path / 'cell.yaml'
+    path.write_text('# a comment\n' + yaml.safe_dump(reordered, default_flow_style=True))
+    assert Cell.from_yaml(path).digest == a.digest
+    changed = copy.deepcopy(document)
+    changed['robot']['joint_limits']['velocity'][0] = 4.0
+    assert Cell.from_dict(changed).digest != a.digest

@@ -1,0 +1,66 @@
+"""``wafer-roadmap``: statistics, JSON, cache hits, progress, plots and exit codes."""
+
+import json
+import os
+import subprocess
+import sys
+
+from wafer_planner_ros.cli.common import run
+from wafer_planner_ros.cli.roadmap import main
+
+
+def _run(capsys, *argv):
+    code = run(main, list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_twice_with_the_same_seed_gives_the_same_hash_and_a_cache_hit(tmp_path, capsys):
+    args = ['--nodes', '300', '--seed', '5', '--cache-dir', str(tmp_path), '--json', '-']
+    code, out, err = _run(capsys, *args)
+    assert code == 0
+    first = json.loads(out)
+    assert first['cache_hit'] is False and 'building roadmap: 300/300 nodes' in err
+    code, out, err = _run(capsys, *args)
+    second = json.loads(out)
+    assert second['cache_hit'] is True and second['hash'] == first['hash']
+    assert 'building roadmap' not in err
+    assert first['nodes'] == second['nodes'] >= 300
+    assert first['stations_connected'] is True
+    assert set(first['samplers']) == {'uniform', 'gaussian', 'bridge'}
+
+
+def test_text_output_and_plot(tmp_path, capsys):
+    png = tmp_path / 'roadmap.png'
+    code, out, _ = _run(capsys, '--nodes', '300', '--no-cache', '--plot', str(png))
+    assert code == 0
+    for label in ('nodes', 'edges', 'components', 'stations', 'samplers', 'build time',
+                  'cache', 'hash'):
+        assert f'\n{label}' in '\n' + out
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20_000
+
+
+def test_json_file_and_test_cell(tmp_path, capsys):
+    out_file = tmp_path / 'stats.json'
+    cell = os.path.join(os.path.dirname(__file__), 'cells', 'notched.yaml')
+    code, _, _ = _run(capsys, '--cell', cell, '--nodes', '300', '--no-cache', '--json',
+                      str(out_file))
+    assert code == 0
+    stats = json.loads(out_file.read_text())
+    assert stats['cell'] == 'efem-notched' and stats['cache_status'] == 'disabled'
+
+
+def test_bad_cell_file_exits_2_naming_the_key(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('cell: {name: x, boundary: [[0, 0], [1, 0], [1, 1]]}\nrobot: {}\n'
+                   'stations: {}\n')
+    result = subprocess.run([sys.executable, '-m', 'wafer_planner_ros.cli.roadmap',
+                             '--cell', str(bad), '--no-cache'],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert 'robot.base: missing' in result.stderr
+
+
+def test_bad_node_count_exits_2(capsys):
+    code, _, err = _run(capsys, '--nodes', '0', '--no-cache')
+    assert code == 2 and '--nodes' in err

@@ -1,0 +1,118 @@
+"""The adaptive PRM: size, connectivity, determinism, sampler statistics, safe edges."""
+
+from dense_check import colliding_segments
+import numpy as np
+import pytest
+
+from wafer_planner_ros.prm import build_roadmap
+from wafer_planner_ros.roadmap import RoadmapSettings, SAMPLER_NAMES
+from wafer_planner_ros.samplers import W_MAX, W_MIN
+from wafer_planner_ros.search import find_path
+
+
+def _pairs(cell):
+    ports = [n for n, s in cell.stations.items() if s.role == 'loadport']
+    locks = [n for n, s in cell.stations.items() if s.role == 'loadlock']
+    return [(a, b) for a in ports for b in locks] + [(b, a) for a in ports for b in locks]
+
+
+def test_roadmap_size_and_density_match_the_paper(roadmap):
+    assert roadmap.node_count >= 1500
+    # Paper: 1500 nodes and 39,900 edges.
+    assert 30_000 <= roadmap.edge_count <= 50_000
+    assert len(np.unique(roadmap.edges, axis=0)) == roadmap.edge_count
+    assert np.all(roadmap.edges[:, 0] < roadmap.edges[:, 1])
+    assert np.allclose(roadmap.lengths, np.linalg.norm(
+        roadmap.nodes[roadmap.edges[:, 1]] - roadmap.nodes[roadmap.edges[:, 0]], axis=1))
+
+
+def test_all_stations_in_one_component_and_every_pair_has_a_path(cell, roadmap):
+    components = set().union(*roadmap.station_component().values())
+    assert len(components) == 1
+    for a, b in _pairs(cell):
+        for _, i in roadmap.stations[a]:
+            for _, j in roadmap.stations[b]:
+                found = find_path(roadmap, cell.clearance_model, cell.robot.lipschitz,
+                                  roadmap.nodes[i], roadmap.nodes[j])
+                assert found is not None, f'no path {a} -> {b}'
+                path, nodes, _ = found
+                assert nodes[0] == i and nodes[-1] == j
+
+
+def test_station_nodes_are_the_station_configurations(cell, roadmap):
+    for name, entries in roadmap.stations.items():
+        configs = {c.elbow: c.q for c in cell.stations[name].configs}
+        assert sorted(e for e, _ in entries) == sorted(configs)
+        for elbow, node in entries:
+            assert np.array_equal(roadmap.nodes[node], configs[elbow])
+            assert roadmap.sampler[node] == -1
+
+
+def test_nodes_are_free_and_clearances_stored(cell, roadmap):
+    fresh = cell.clearance_model.body_clearance(roadmap.nodes)
+    assert np.array_equal(fresh, roadmap.clearance)
+    assert np.all(fresh > 0)
+
+
+def test_sampler_statistics_add_up(roadmap):
+    samplers = roadmap.stats['samplers']
+    assert list(samplers) == list(SAMPLER_NAMES)
+    assert sum(s['nodes'] for s in samplers.values()) == roadmap.settings.nodes
+    for name, s in samplers.items():
+        assert s['draws'] == s['nodes'] + s['failed'] + s['discarded']
+        assert s['nodes'] == s['merges'] + s['new_components'] + s['coverage'] + s['redundant']
+        assert (roadmap.sampler == SAMPLER_NAMES.index(name)).sum() == s['nodes']
+        assert W_MIN <= s['weight'] <= W_MAX
+    # The rule adapts: the weights no longer all equal their start value.
+    assert len({round(s['weight'], 6) for s in samplers.values()}) > 1
+
+
+def test_same_seed_same_roadmap_other_seed_other_roadmap(default_cell):
+    settings = RoadmapSettings(nodes=300)
+    a = build_roadmap(default_cell, settings, seed=7)
+    b = build_roadmap(default_cell, settings, seed=7)
+    c = build_roadmap(default_cell, settings, seed=8)
+    assert a.digest == b.digest
+    for name, array in a.arrays().items():
+        assert np.array_equal(array, b.arrays()[name]), name
+    assert c.digest != a.digest
+
+
+def test_progress_is_reported_until_done(default_cell):
+    calls = []
+    build_roadmap(default_cell, RoadmapSettings(nodes=300),
+                  progress=lambda done, total, edges: calls.append((done, total, edges)))
+    assert calls[-1][:2] == (300, 300)
+    assert [c[0] for c in calls] == sorted(c[0] for c in calls)
+
+
+def test_arbitrary_configurations_connect_at_query_time(cell, roadmap):
+    rng = np.random.default_rng(41)
+    model, lipschitz = cell.clearance_model, cell.robot.lipschitz
+    limits = cell.robot.limits.position
+    q = rng.uniform(limits[:, 0], limits[:, 1], (200, 3))
+    q = q[model.clearance(q) > 0][:20]
+    goal = roadmap.nodes[roadmap.stations[sorted(roadmap.stations)[0]][0][1]]
+    reached = 0
+    for start in q:
+        nodes, lengths = roadmap.connect(model, lipschitz, start)
+        assert np.allclose(lengths, np.linalg.norm(roadmap.nodes[nodes] - start, axis=1))
+        found = find_path(roadmap, model, lipschitz, start, goal)
+        if found is not None:
+            reached += 1
+            path = found[0]
+            assert np.array_equal(path[0], start) and np.array_equal(path[-1], goal)
+            assert len(colliding_segments(cell.fcl_model(), path[:-1], path[1:])) == 0
+    assert reached >= 18
+    with pytest.raises(ValueError, match='in collision'):
+        roadmap.connect(model, lipschitz, np.array([-np.pi / 2, 0.0, 0.0]))
+
+
+@pytest.mark.slow
+def test_every_edge_of_the_default_roadmap_is_free_when_rechecked_densely_with_fcl(
+        default_cell, default_roadmap):
+    edges = default_roadmap.edges
+    nodes = default_roadmap.nodes
+    colliding = colliding_segments(default_cell.fcl_model(), nodes[edges[:, 0]],
+                                   nodes[edges[:, 1]])
+    assert len(colliding) == 0, f'{len(colliding)} edges collide, e.g. {edges[colliding[0]]}'

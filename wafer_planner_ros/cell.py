@@ -1,0 +1,319 @@
+"""
+The cell model: enclosure, robot, limits and stations, loaded and validated from YAML.
+
+``Cell.from_yaml`` is the one entry point; a cell that loads is complete and consistent
+(every station resolved to collision-free joint configurations), and a bad file raises
+:class:`CellError` naming the key path and the reason, never a half-built cell.
+"""
+
+from dataclasses import dataclass, field
+import functools
+import hashlib
+import json
+from pathlib import Path
+import sys
+from typing import Mapping, Optional, Tuple
+
+import numpy as np
+from wafer_planner_ros import schema
+from wafer_planner_ros.clearance import ClearanceModel
+from wafer_planner_ros.errors import CellError
+from wafer_planner_ros.geometry import points_in_polygon, segments_intersect
+from wafer_planner_ros.geometry import self_intersection, signed_area
+from wafer_planner_ros.kinematics import IkSolution, PlanarArm
+from wafer_planner_ros.lipschitz import body_constants
+import yaml
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def default_cell_path() -> Path:
+    """Return the packaged default cell: from the source tree, or the install's share/."""
+    prefixes = list(_PACKAGE.parents)[3:4] + [Path(sys.prefix)]  # <prefix>/lib/pythonX/site-p..
+    candidates = [_PACKAGE.parent / 'config']  # source checkout or symlink install
+    candidates += [prefix / 'share' / 'wafer_planner_ros' / 'config' for prefix in prefixes]
+    for folder in candidates:
+        if (folder / 'efem_default.yaml').is_file():
+            return folder / 'efem_default.yaml'
+    raise FileNotFoundError('config/efem_default.yaml is not installed with wafer_planner_ros')
+
+
+@dataclass(frozen=True, eq=False)
+class JointLimits:
+    """Joint limits, one row or entry per joint."""
+
+    position: np.ndarray
+    """(3, 2) lower/upper angle (rad)."""
+    velocity: np.ndarray
+    """(3,) rad/s."""
+    acceleration: np.ndarray
+    """(3,) rad/s^2."""
+    jerk: Optional[np.ndarray] = None
+    """(3,) rad/s^3, optional."""
+
+
+@dataclass(frozen=True, eq=False)
+class Robot:
+    """The arm's geometry and limits."""
+
+    base: np.ndarray
+    """Shoulder axis position (m), (2,)."""
+    joint_names: Tuple[str, str, str]
+    link_lengths: np.ndarray
+    """Shoulder->elbow, elbow->wrist, wrist->wafer centre (m), (3,)."""
+    link_radii: np.ndarray
+    """Capsule radius of each link (m), (3,)."""
+    wafer_radius: float
+    """m."""
+    limits: JointLimits
+    wafer_acceleration_limit: np.ndarray
+    """Wafer-centre acceleration limit on x and y (m/s^2), (2,)."""
+    wafer_acceleration_norm_limit: Optional[float] = None
+    """Optional limit on the wafer-centre acceleration's magnitude (m/s^2)."""
+
+    @functools.cached_property
+    def arm(self) -> PlanarArm:
+        """Return the kinematic chain."""
+        return PlanarArm(self.base, self.link_lengths)
+
+    @property
+    def body_radii(self) -> np.ndarray:
+        """Return the radii of the bodies: three links then the wafer (m)."""
+        return np.append(self.link_radii, self.wafer_radius)
+
+    @property
+    def body_names(self) -> Tuple[str, ...]:
+        """Return body names for messages: '<joint> link' for each link, then 'wafer'."""
+        return tuple(f'{name} link' for name in self.joint_names) + ('wafer',)
+
+    @functools.cached_property
+    def lipschitz(self) -> np.ndarray:
+        """Return the per-body Lipschitz constants C (4, 3) in m/rad."""
+        return body_constants(self.link_lengths, self.body_radii)
+
+
+@dataclass(frozen=True, eq=False)
+class Station:
+    """A named place the wafer is picked from or put down at, resolved to joint angles."""
+
+    name: str
+    configs: Tuple[IkSolution, ...]
+    """Collision-free joint configurations, one per allowed elbow branch."""
+    spec: Mapping = field(default_factory=dict)
+    """The station as written in the cell file (canonical numbers)."""
+
+    @property
+    def role(self) -> str:
+        """Return 'loadport', 'loadlock' or 'other', from the station's name."""
+        for role in ('loadport', 'loadlock'):
+            if self.name.startswith(role):
+                return role
+        return 'other'
+
+
+@dataclass(frozen=True, eq=False)
+class Cell:
+    """A validated work cell."""
+
+    name: str
+    boundary: np.ndarray
+    """(V, 2) polygon, counter-clockwise."""
+    obstacles: Tuple[np.ndarray, ...]
+    """(V_j, 2) polygons, counter-clockwise."""
+    robot: Robot
+    stations: Mapping[str, Station]
+    source: Optional[str] = None
+    """The file the cell was loaded from."""
+
+    @classmethod
+    def from_yaml(cls, path) -> 'Cell':
+        """Load and validate a cell file; raise CellError naming the bad key."""
+        path = Path(path)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except OSError as exc:
+            raise CellError(str(path), f'cannot read: {exc.strerror}') from None
+        except yaml.YAMLError as exc:
+            raise CellError(str(path), f'not valid YAML: {exc}') from None
+        return cls.from_dict(data, source=str(path))
+
+    @classmethod
+    def from_dict(cls, data, source=None) -> 'Cell':
+        """Validate a parsed cell document."""
+        top = schema.mapping(data, '', required=('cell', 'robot', 'stations'))
+        cell = schema.mapping(top['cell'], 'cell', required=('name', 'boundary'),
+                              optional=('obstacles',))
+        boundary = _polygon(cell['boundary'], 'cell.boundary')
+        obstacles = cell.get('obstacles') or []
+        if not isinstance(obstacles, list):
+            raise CellError('cell.obstacles', 'must be a list of polygons')
+        obstacles = tuple(_polygon(o, f'cell.obstacles[{j}]') for j, o in enumerate(obstacles))
+        for j, obstacle in enumerate(obstacles):
+            _check_inside(obstacle, boundary, f'cell.obstacles[{j}]')
+        robot = _robot(top['robot'], boundary, obstacles)
+        model = ClearanceModel(robot.arm, robot.body_radii, robot.body_names, boundary, obstacles)
+        stations = _stations(top['stations'], robot, model)
+        return cls(name=schema.text(cell['name'], 'cell.name'), boundary=boundary,
+                   obstacles=obstacles, robot=robot, stations=stations, source=source)
+
+    @functools.cached_property
+    def clearance_model(self) -> ClearanceModel:
+        """Return the vectorised collision/clearance model of this cell."""
+        r = self.robot
+        return ClearanceModel(r.arm, r.body_radii, r.body_names, self.boundary, self.obstacles)
+
+    def fcl_model(self):
+        """Return a new reference collision model on python-fcl."""
+        from wafer_planner_ros.fcl_model import FclModel
+        return FclModel(self.robot.arm, self.robot.body_radii, self.boundary, self.obstacles)
+
+    def canonical(self) -> dict:
+        """Return the cell as plain data, independent of file layout, comments and order."""
+        r = self.robot
+        return {
+            'name': self.name,
+            'boundary': self.boundary.tolist(),
+            'obstacles': [o.tolist() for o in self.obstacles],
+            'robot': {
+                'base': r.base.tolist(), 'joint_names': list(r.joint_names),
+                'link_lengths': r.link_lengths.tolist(), 'link_radii': r.link_radii.tolist(),
+                'wafer_radius': r.wafer_radius,
+                'position': r.limits.position.tolist(), 'velocity': r.limits.velocity.tolist(),
+                'acceleration': r.limits.acceleration.tolist(),
+                'jerk': None if r.limits.jerk is None else r.limits.jerk.tolist(),
+                'wafer_acceleration_limit': r.wafer_acceleration_limit.tolist(),
+                'wafer_acceleration_norm_limit': r.wafer_acceleration_norm_limit,
+            },
+            'stations': {name: dict(s.spec) for name, s in sorted(self.stations.items())},
+        }
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """Return the SHA-256 of the canonical cell."""
+        text = json.dumps(self.canonical(), sort_keys=True, separators=(',', ':'))
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _polygon(value, path: str) -> np.ndarray:
+    polygon = schema.points(value, path, minimum=3)
+    crossing = self_intersection(polygon)
+    if crossing is not None:
+        raise CellError(path, f'self-intersecting (edges {crossing[0]} and {crossing[1]} meet)')
+    area = signed_area(polygon)
+    if abs(area) < 1e-12:
+        raise CellError(path, 'has zero area')
+    return polygon if area > 0 else polygon[::-1].copy()
+
+
+def _check_inside(polygon: np.ndarray, boundary: np.ndarray, path: str) -> None:
+    """Reject an obstacle wholly outside the boundary (one touching a wall is fine)."""
+    start, end = polygon, np.roll(polygon, -1, axis=0)
+    b_start, b_end = boundary, np.roll(boundary, -1, axis=0)
+    crosses = segments_intersect(start[:, None], end[:, None], b_start, b_end)
+    if not crosses.any() and not points_in_polygon(polygon, boundary).any():
+        raise CellError(path, 'lies outside cell.boundary')
+
+
+def _robot(value, boundary, obstacles) -> Robot:
+    r = schema.mapping(value, 'robot', required=(
+        'base', 'joint_names', 'link_lengths', 'link_radii', 'wafer_radius', 'joint_limits',
+        'wafer_acceleration_limit'), optional=('wafer_acceleration_norm_limit',))
+    base = schema.vector(r['base'], 'robot.base', 2)
+    if not points_in_polygon(base, boundary) or any(
+            points_in_polygon(base, o) for o in obstacles):
+        raise CellError('robot.base', f'{base.tolist()} is not inside the free space')
+    names = r['joint_names']
+    if not isinstance(names, list) or len(names) != 3:
+        raise CellError('robot.joint_names', f'must be a list of 3 names, got {names!r}')
+    names = tuple(schema.text(n, f'robot.joint_names[{i}]') for i, n in enumerate(names))
+    if len(set(names)) != 3:
+        raise CellError('robot.joint_names', f'must be unique, got {list(names)}')
+    norm = r.get('wafer_acceleration_norm_limit')
+    return Robot(
+        base=base, joint_names=names,
+        link_lengths=schema.vector(r['link_lengths'], 'robot.link_lengths', 3, positive=True),
+        link_radii=schema.vector(r['link_radii'], 'robot.link_radii', 3, positive=True),
+        wafer_radius=schema.number(r['wafer_radius'], 'robot.wafer_radius', positive=True),
+        limits=_limits(r['joint_limits']),
+        wafer_acceleration_limit=schema.vector(
+            r['wafer_acceleration_limit'], 'robot.wafer_acceleration_limit', 2, positive=True),
+        wafer_acceleration_norm_limit=None if norm is None else schema.number(
+            norm, 'robot.wafer_acceleration_norm_limit', positive=True))
+
+
+def _limits(value) -> JointLimits:
+    path = 'robot.joint_limits'
+    lim = schema.mapping(value, path, required=('position', 'velocity', 'acceleration'),
+                         optional=('jerk',))
+    position = lim['position']
+    if not isinstance(position, list) or len(position) != 3:
+        raise CellError(f'{path}.position', 'must be a list of 3 [lower, upper] pairs')
+    position = np.array([schema.vector(p, f'{path}.position[{i}]', 2)
+                         for i, p in enumerate(position)])
+    for i, (lower, upper) in enumerate(position):
+        if not lower < upper:
+            raise CellError(f'{path}.position[{i}]',
+                            f'lower limit {lower} must be below upper limit {upper}')
+    jerk = lim.get('jerk')
+    return JointLimits(
+        position=position,
+        velocity=schema.vector(lim['velocity'], f'{path}.velocity', 3, positive=True),
+        acceleration=schema.vector(lim['acceleration'], f'{path}.acceleration', 3,
+                                   positive=True),
+        jerk=None if jerk is None else schema.vector(jerk, f'{path}.jerk', 3, positive=True))
+
+
+def _stations(value, robot: Robot, model: ClearanceModel) -> dict:
+    if not isinstance(value, dict) or not value:
+        raise CellError('stations', 'must be a non-empty mapping of station names')
+    return {str(name): _station(str(name), spec, robot, model) for name, spec in value.items()}
+
+
+def _station(name: str, value, robot: Robot, model: ClearanceModel) -> Station:
+    path = f'stations.{name}'
+    if isinstance(value, dict) and 'joints' in value:
+        schema.mapping(value, path, required=('joints',))
+        q = schema.vector(value['joints'], f'{path}.joints', 3)
+        lower, upper = robot.limits.position.T
+        for i in range(3):
+            if not lower[i] <= q[i] <= upper[i]:
+                raise CellError(f'{path}.joints[{i}]',
+                                f'{q[i]} is outside the joint limits [{lower[i]}, {upper[i]}]')
+        candidates = [IkSolution(elbow=1 if q[1] >= 0 else -1, q=q)]
+        spec = {'joints': q.tolist()}
+    else:
+        s = schema.mapping(value, path, required=('wafer_center', 'heading'),
+                           optional=('elbow',))
+        centre = schema.vector(s['wafer_center'], f'{path}.wafer_center', 2)
+        heading = schema.number(s['heading'], f'{path}.heading')
+        elbow = s.get('elbow')
+        if elbow is not None and (isinstance(elbow, bool) or elbow not in (1, -1)):
+            raise CellError(f'{path}.elbow', f'must be 1 or -1, got {elbow!r}')
+        candidates = _reach(robot, centre, heading, elbow, path)
+        spec = {'wafer_center': centre.tolist(), 'heading': heading, 'elbow': elbow}
+    clearance = model.body_clearance(np.array([c.q for c in candidates])).min(axis=1)
+    free = tuple(c for c, d in zip(candidates, clearance) if d > 0.0)
+    if not free:
+        contact = model.contact(candidates[int(np.argmax(clearance))].q)
+        depth = '' if contact.crossing else f', overlap {-contact.clearance * 1000:.1f} mm'
+        raise CellError(path, f'in collision ({contact.body} vs {contact.obstacle}{depth})')
+    return Station(name=name, configs=free, spec=spec)
+
+
+def _reach(robot: Robot, centre, heading, elbow, path) -> list:
+    solutions = robot.arm.inverse(centre, heading, robot.limits.position)
+    if not solutions:
+        l1, l2, l3 = robot.link_lengths
+        wrist = centre - l3 * np.array([np.cos(heading), np.sin(heading)])
+        reach = float(np.hypot(*(wrist - robot.base)))
+        if abs(l1 - l2) <= reach <= l1 + l2:
+            raise CellError(path, 'unreachable within robot.joint_limits.position on '
+                                  'either elbow branch')
+        raise CellError(path, f'unreachable (the wrist would be {reach:.3f} m from the '
+                              f'shoulder; the arm reaches {abs(l1 - l2):.3f} to {l1 + l2:.3f} m)')
+    if elbow is not None:
+        solutions = [s for s in solutions if s.elbow == elbow]
+        if not solutions:
+            raise CellError(f'{path}.elbow',
+                            f'branch {elbow} is outside robot.joint_limits.position')
+    return solutions

@@ -1,0 +1,106 @@
+"""What the command-line tools share: cell and roadmap options, progress, JSON output."""
+
+import argparse
+import json
+import logging
+import sys
+
+from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
+from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.errors import CellError
+from wafer_planner_ros.roadmap import RoadmapSettings
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+
+
+def add_roadmap_options(parser: argparse.ArgumentParser) -> None:
+    """Add --cell, --nodes, --seed, --cache-dir and --no-cache."""
+    parser.add_argument('--cell', help='cell YAML file (default: the packaged default cell)')
+    parser.add_argument('--nodes', type=int, default=RoadmapSettings.nodes,
+                        help='roadmap nodes (default: %(default)s)')
+    parser.add_argument('--seed', type=int, default=0, help='roadmap seed (default: 0)')
+    parser.add_argument('--cache-dir', default=str(DEFAULT_CACHE_DIR),
+                        help='roadmap cache directory (default: %(default)s)')
+    parser.add_argument('--no-cache', action='store_true', help='always build, never store')
+
+
+def load_cell(args):
+    """Return the cell named by --cell; raise UsageError with the validation message."""
+    try:
+        return Cell.from_yaml(args.cell or default_cell_path())
+    except CellError as exc:
+        raise UsageError(f'bad cell file: {exc}') from None
+
+
+def roadmap_for(args, cell, quiet=False):
+    """Return the CachedRoadmap for the options, showing build progress on stderr."""
+    try:
+        settings = RoadmapSettings(nodes=args.nodes)
+    except ValueError as exc:
+        raise UsageError(f'--nodes: {exc}') from None
+    progress = None if quiet else Progress('building roadmap')
+    result = load_or_build(cell, settings, args.seed, None if args.no_cache else args.cache_dir,
+                           progress)
+    if progress is not None:
+        progress.done()
+    return result
+
+
+class UsageError(Exception):
+    """A bad command line or input file (exit code 2)."""
+
+
+def run(main, argv=None) -> int:
+    """Run a tool's ``main(argv)``; a UsageError prints its message and returns 2."""
+    configure_logging()
+    try:
+        return main(argv)
+    except UsageError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return EXIT_USAGE
+
+
+class Progress:
+    """Show ``label: done/total nodes, edges`` on stderr while a roadmap builds."""
+
+    def __init__(self, label: str, stream=None):
+        """Print to ``stream`` (stderr); on a terminal one line is rewritten in place."""
+        self.label, self.stream = label, stream or sys.stderr
+        self.tty = self.stream.isatty()
+        self.shown = False
+        self.last_decile = -1
+
+    def __call__(self, done: int, total: int, edges: int) -> None:
+        """Report progress; off a terminal, print at every tenth of the way."""
+        line = f'{self.label}: {done}/{total} nodes, {edges} edges'
+        if self.tty:
+            self.stream.write('\r' + line)
+        else:
+            decile = 10 * done // max(total, 1)
+            if decile == self.last_decile:
+                return
+            self.last_decile = decile
+            self.stream.write(line + '\n')
+        self.stream.flush()
+        self.shown = True
+
+    def done(self) -> None:
+        """End the progress line."""
+        if self.shown and self.tty:
+            self.stream.write('\n')
+            self.stream.flush()
+
+
+def write_json(data, destination: str) -> None:
+    """Write JSON to a file, or to stdout for '-'."""
+    text = json.dumps(data, indent=2)
+    if destination == '-':
+        print(text)
+    else:
+        with open(destination, 'w') as stream:
+            stream.write(text + '\n')
+
+
+def configure_logging() -> None:
+    """Send the package's warnings to stderr."""
+    logging.basicConfig(level=logging.WARNING, format='%(levelname)s: %(message)s')

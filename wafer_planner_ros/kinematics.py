@@ -1,0 +1,106 @@
+"""
+Kinematics of the planar three-joint wafer-transfer arm.
+
+q1 is the shoulder angle from +x; q2 and q3 are relative (elbow, wrist); the blade heading
+is q1 + q2 + q3. Every function takes configurations of shape (..., 3) and vectorises over
+the leading axes.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class IkSolution:
+    """One inverse-kinematics branch of a wafer pose."""
+
+    elbow: int
+    """Sign of q2: +1 or -1."""
+    q: np.ndarray
+    """Joint angles (rad), shape (3,)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PlanarArm:
+    """A planar serial arm: shoulder at ``base``, links of ``link_lengths`` (m)."""
+
+    base: np.ndarray
+    """Shoulder axis position (m), shape (2,)."""
+    link_lengths: np.ndarray
+    """Shoulder->elbow, elbow->wrist, wrist->wafer centre (m), shape (3,)."""
+
+    def absolute_angles(self, q: np.ndarray) -> np.ndarray:
+        """Return the absolute angle of each link from +x (rad), shape (..., 3)."""
+        return np.cumsum(q, axis=-1)
+
+    def joint_points(self, q: np.ndarray) -> np.ndarray:
+        """Return base, elbow, wrist and wafer centre (m), shape (..., 4, 2)."""
+        theta = self.absolute_angles(np.asarray(q, dtype=float))
+        steps = self.link_lengths[:, None] * np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+        points = np.empty(theta.shape[:-1] + (4, 2))
+        points[..., 0, :] = self.base
+        points[..., 1:, :] = self.base + np.cumsum(steps, axis=-2)
+        return points
+
+    def wafer_center(self, q: np.ndarray) -> np.ndarray:
+        """Return the wafer-centre position (m), shape (..., 2)."""
+        return self.joint_points(q)[..., 3, :]
+
+    def heading(self, q: np.ndarray) -> np.ndarray:
+        """Return the blade heading q1 + q2 + q3 (rad)."""
+        return np.sum(q, axis=-1)
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Return d(wafer centre)/dq, shape (..., 2, 3)."""
+        theta = self.absolute_angles(np.asarray(q, dtype=float))
+        # Column i sums the contributions of links i..2, all rotated by joint i.
+        tail_x = np.cumsum((self.link_lengths * np.cos(theta))[..., ::-1], axis=-1)[..., ::-1]
+        tail_y = np.cumsum((self.link_lengths * np.sin(theta))[..., ::-1], axis=-1)[..., ::-1]
+        return np.stack([-tail_y, tail_x], axis=-2)
+
+    def wafer_velocity(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Return the wafer-centre velocity (m/s), shape (..., 2)."""
+        return np.einsum('...ij,...j->...i', self.jacobian(q), qd)
+
+    def wafer_acceleration(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """Return the wafer-centre acceleration (m/s^2) for (q, qd, qdd), shape (..., 2)."""
+        theta = self.absolute_angles(np.asarray(q, dtype=float))
+        omega = np.cumsum(qd, axis=-1)
+        alpha = np.cumsum(qdd, axis=-1)
+        c, s = np.cos(theta), np.sin(theta)
+        ax = np.sum(self.link_lengths * (-alpha * s - omega ** 2 * c), axis=-1)
+        ay = np.sum(self.link_lengths * (alpha * c - omega ** 2 * s), axis=-1)
+        return np.stack([ax, ay], axis=-1)
+
+    def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:
+        """
+        Return the IK branches placing the wafer centre at ``wafer_center`` with ``heading``.
+
+        Angles are wrapped by multiples of 2*pi into ``position_limits`` (shape (3, 2));
+        a branch that cannot be wrapped into the limits is left out. An unreachable pose
+        gives an empty list.
+        """
+        l1, l2, l3 = self.link_lengths
+        wrist = np.asarray(wafer_center, float) - l3 * np.array([np.cos(heading), np.sin(heading)])
+        dx, dy = wrist - self.base
+        cos_q2 = (dx * dx + dy * dy - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
+        if abs(cos_q2) > 1.0 + 1e-12:
+            return []
+        solutions = []
+        for elbow in (1, -1):
+            q2 = elbow * np.arccos(np.clip(cos_q2, -1.0, 1.0))
+            q1 = np.arctan2(dy, dx) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+            q = wrap_into_limits(np.array([q1, q2, heading - q1 - q2]), position_limits)
+            if q is not None and not any(np.allclose(q, s.q) for s in solutions):
+                solutions.append(IkSolution(elbow=elbow, q=q))
+        return solutions
+
+
+def wrap_into_limits(q: np.ndarray, position_limits: np.ndarray):
+    """Return q with each angle shifted by a multiple of 2*pi into its limits, or None."""
+    lower, upper = position_limits[:, 0], position_limits[:, 1]
+    # Smallest shift that brings the angle at or above the lower limit.
+    shifted = q + 2.0 * np.pi * np.ceil((lower - q) / (2.0 * np.pi) - 1e-12)
+    inside = (shifted >= lower - 1e-12) & (shifted <= upper + 1e-12)
+    return np.clip(shifted, lower, upper) if bool(np.all(inside)) else None

@@ -1,0 +1,146 @@
+"""The roadmap: free configurations joined by certified straight edges in joint space."""
+
+from dataclasses import asdict, dataclass, field
+import functools
+import hashlib
+import json
+from typing import Mapping, Tuple
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from wafer_planner_ros.certify import certify_segments
+
+SAMPLER_NAMES = ('uniform', 'gaussian', 'bridge')
+STATION_SAMPLER = -1  # sampler index stored for station nodes
+
+
+@dataclass(frozen=True)
+class RoadmapSettings:
+    """How a roadmap is built; part of the cache key."""
+
+    nodes: int = 1500
+    """Sampled nodes (stations are added on top)."""
+    neighbors: int = 30
+    """Nearest earlier nodes each new node tries to connect to (30: ~40,000 edges, paper)."""
+    station_neighbors: int = 80
+    """Nearest nodes a station (or a query configuration) tries to connect to."""
+    gaussian_sigma: float = 0.15
+    """Spread of the Gaussian sampler's second sample (rad)."""
+    bridge_sigma: float = 0.5
+    """Spread of the bridge test's second end (rad)."""
+    draws_per_round: int = 200
+    """Sampler draws between weight updates."""
+    redundancy_radius: float = 0.1
+    """A sample this close (rad) to a node of the component it joins is redundant."""
+
+    def __post_init__(self):
+        """Reject settings that cannot build a roadmap."""
+        for name in ('nodes', 'neighbors', 'station_neighbors', 'draws_per_round'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f'roadmap setting {name} must be a positive integer, '
+                                 f'got {value!r}')
+        for name in ('gaussian_sigma', 'bridge_sigma', 'redundancy_radius'):
+            if not getattr(self, name) > 0:
+                raise ValueError(
+                    f'roadmap setting {name} must be > 0, got {getattr(self, name)!r}')
+
+
+@dataclass(frozen=True, eq=False)
+class Roadmap:
+    """A built roadmap. Arrays are read-only; edges are stored once with i < j."""
+
+    nodes: np.ndarray
+    """(N, 3) configurations (rad)."""
+    clearance: np.ndarray
+    """(N, B) per-body clearance of each node (m)."""
+    sampler: np.ndarray
+    """(N,) index into SAMPLER_NAMES, or STATION_SAMPLER."""
+    edges: np.ndarray
+    """(M, 2) node indices."""
+    lengths: np.ndarray
+    """(M,) joint-space length of each edge (rad)."""
+    stations: Mapping[str, Tuple[Tuple[int, int], ...]]
+    """Station name -> ((elbow, node index), ...)."""
+    seed: int
+    settings: RoadmapSettings
+    stats: Mapping = field(default_factory=dict)
+    """Build statistics (per-sampler counts, timings) as plain data."""
+
+    def __post_init__(self):
+        """Freeze the arrays."""
+        for name in ('nodes', 'clearance', 'sampler', 'edges', 'lengths'):
+            getattr(self, name).flags.writeable = False
+
+    @property
+    def node_count(self) -> int:
+        """Return the number of nodes."""
+        return len(self.nodes)
+
+    @property
+    def edge_count(self) -> int:
+        """Return the number of edges."""
+        return len(self.edges)
+
+    @functools.cached_property
+    def graph(self) -> csr_matrix:
+        """Return the symmetric adjacency matrix weighted by edge length."""
+        i, j = self.edges[:, 0], self.edges[:, 1]
+        n = self.node_count
+        return csr_matrix((np.concatenate([self.lengths, self.lengths]),
+                           (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n))
+
+    @functools.cached_property
+    def components(self) -> np.ndarray:
+        """Return the connected-component label of every node."""
+        return connected_components(self.graph, directed=False)[1]
+
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        """Return a KD-tree over the nodes."""
+        return cKDTree(self.nodes)
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """Return the SHA-256 of the roadmap's content (nodes, edges, stations, seed)."""
+        h = hashlib.sha256()
+        for name, array in self.arrays().items():
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(array).tobytes())
+        h.update(json.dumps({'stations': self.stations, 'seed': self.seed,
+                             'settings': asdict(self.settings)}, sort_keys=True).encode())
+        return h.hexdigest()
+
+    def arrays(self) -> dict:
+        """Return the roadmap's arrays by name (for hashing and saving)."""
+        return {'nodes': self.nodes, 'clearance': self.clearance, 'sampler': self.sampler,
+                'edges': self.edges, 'lengths': self.lengths}
+
+    def station_component(self) -> dict:
+        """Return, per station, the set of components its nodes lie in."""
+        return {name: {int(self.components[node]) for _, node in entries}
+                for name, entries in self.stations.items()}
+
+    def connect(self, model, lipschitz: np.ndarray, q: np.ndarray, neighbors=None):
+        """
+        Return certified edges from a free configuration q to its nearest nodes.
+
+        Returns ``(nodes, lengths)``: the indices of the nodes q can reach in a straight
+        certified line among its ``neighbors`` nearest (default ``station_neighbors``), and
+        the joint-space lengths. Raises ValueError when q itself is not free.
+        """
+        q = np.asarray(q, dtype=float)
+        dq = model.body_clearance(q[None])
+        if np.any(dq <= 0.0):
+            raise ValueError(f'configuration {q.tolist()} is in collision')
+        k = min(neighbors or self.settings.station_neighbors, self.node_count)
+        _, index = self.tree.query(q, k=k)
+        index = np.atleast_1d(index)
+        ok, _ = certify_segments(model, lipschitz, np.broadcast_to(q, (len(index), 3)),
+                                 self.nodes[index], np.repeat(dq, len(index), axis=0),
+                                 self.clearance[index])
+        index = index[ok]
+        return index, np.linalg.norm(self.nodes[index] - q, axis=1)
