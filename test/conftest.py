@@ -19,6 +19,12 @@ def cell(request) -> Cell:
 
 
 @pytest.fixture(scope='session')
+def default_cell_file() -> Path:
+    """Return the packaged default cell file."""
+    return default_cell_path()
+
+
+@pytest.fixture(scope='session')
 def default_cell() -> Cell:
     """Return the packaged default cell."""
     return Cell.from_yaml(default_cell_path())

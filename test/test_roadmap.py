@@ -116,3 +116,24 @@ def test_every_edge_of_the_default_roadmap_is_free_when_rechecked_densely_with_f
     colliding = colliding_segments(default_cell.fcl_model(), nodes[edges[:, 0]],
                                    nodes[edges[:, 1]])
     assert len(colliding) == 0, f'{len(colliding)} edges collide, e.g. {edges[colliding[0]]}'
+
+
+class _Solid:
+    """A clearance model of a cell with no free space at all."""
+
+    body_count = 4
+
+    def body_clearance(self, q):
+        return -np.ones((len(np.atleast_2d(q)), 4))
+
+    def clearance(self, q):
+        return -np.ones(len(np.atleast_2d(q)))
+
+
+def test_build_gives_up_with_a_clear_error_when_nothing_is_free(default_cell_file):
+    from wafer_planner_ros.cell import Cell
+    from wafer_planner_ros.errors import WaferPlannerError
+    cell = Cell.from_yaml(default_cell_file)
+    cell.__dict__['clearance_model'] = _Solid()  # a fresh cell, so no fixture is affected
+    with pytest.raises(WaferPlannerError, match='no free configuration in 10000 draws'):
+        build_roadmap(cell, RoadmapSettings(nodes=100))

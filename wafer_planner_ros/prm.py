@@ -16,9 +16,13 @@ from scipy.spatial import cKDTree
 
 from wafer_planner_ros import samplers
 from wafer_planner_ros.certify import certify_segments
+from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.roadmap import Roadmap, RoadmapSettings, SAMPLER_NAMES, STATION_SAMPLER
 
 logger = logging.getLogger(__name__)
+
+BARREN_ROUNDS = 50
+"""Rounds in a row without a single free sample after which the build gives up."""
 
 
 class _UnionFind:
@@ -37,12 +41,11 @@ class _UnionFind:
 
 
 class _Builder:
-    def __init__(self, cell, settings: RoadmapSettings, rng, progress):
+    def __init__(self, cell, settings: RoadmapSettings, rng):
         self.model = cell.clearance_model
         self.lipschitz = cell.robot.lipschitz
         self.settings = settings
         self.rng = rng
-        self.progress = progress
         lower, upper = cell.robot.limits.position.T
         self.pool = samplers.make_pool(lower, upper, settings.gaussian_sigma,
                                        settings.bridge_sigma)
@@ -61,7 +64,8 @@ class _Builder:
         self.candidates = 0
         self.rounds = 0
 
-    def sample_round(self) -> None:
+    def sample_round(self) -> int:
+        """Draw one round, add its free samples as nodes; return how many were added."""
         s = self.settings
         choice = self.rng.choice(len(self.pool), size=s.draws_per_round,
                                  p=samplers.probabilities(self.weights))
@@ -92,6 +96,7 @@ class _Builder:
             rewards[sampler_index] += _REWARD[outcome]
         self.weights = samplers.update_weights(self.weights, rewards, draws.astype(float))
         self.rounds += 1
+        return len(order)
 
     def add_nodes(self, q, d, which, neighbors: int) -> list:
         """Add nodes, connect each to its nearest earlier nodes; return each one's outcome."""
@@ -184,12 +189,19 @@ def build_roadmap(cell, settings: RoadmapSettings = RoadmapSettings(), seed: int
     """
     Build the roadmap of ``cell``; the same cell, settings and seed give the same roadmap.
 
-    ``progress(nodes_done, nodes_total, edges)`` is called after every round.
+    ``progress(nodes_done, nodes_total, edges)`` is called after every round. Raises
+    WaferPlannerError when sampling finds no free configuration for a long time.
     """
     started = time.perf_counter()
-    builder = _Builder(cell, settings, np.random.default_rng(seed), progress)
+    builder = _Builder(cell, settings, np.random.default_rng(seed))
+    barren = 0
     while builder.count < settings.nodes:
-        builder.sample_round()
+        barren = 0 if builder.sample_round() else barren + 1
+        if barren == BARREN_ROUNDS:
+            raise WaferPlannerError(
+                f'roadmap of {cell.name}: no free configuration in '
+                f'{BARREN_ROUNDS * settings.draws_per_round} draws after {builder.count} '
+                'nodes; the robot barely fits in the cell')
         if progress is not None:
             progress(builder.count, settings.nodes, sum(len(e) for e in builder.edges))
     roadmap = builder.finish(cell, seed, started)

@@ -7,7 +7,7 @@ import sys
 
 from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.cell import Cell, default_cell_path
-from wafer_planner_ros.errors import CellError
+from wafer_planner_ros.errors import CellError, WaferPlannerError
 from wafer_planner_ros.roadmap import RoadmapSettings
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
@@ -51,13 +51,16 @@ class UsageError(Exception):
 
 
 def run(main, argv=None) -> int:
-    """Run a tool's ``main(argv)``; a UsageError prints its message and returns 2."""
+    """Run a tool's ``main(argv)``: exit 2 on a UsageError, 1 on another planner error."""
     configure_logging()
     try:
         return main(argv)
     except UsageError as exc:
         print(f'error: {exc}', file=sys.stderr)
         return EXIT_USAGE
+    except WaferPlannerError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return EXIT_FAILURE
 
 
 class Progress:
