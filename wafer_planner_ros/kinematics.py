@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wafer_planner_ros import autodiff as ad
+
 
 @dataclass(frozen=True)
 class IkSolution:
@@ -65,13 +67,22 @@ class PlanarArm:
 
     def wafer_acceleration(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """Return the wafer-centre acceleration (m/s^2) for (q, qd, qdd), shape (..., 2)."""
-        theta = self.absolute_angles(np.asarray(q, dtype=float))
-        omega = np.cumsum(qd, axis=-1)
-        alpha = np.cumsum(qdd, axis=-1)
-        c, s = np.cos(theta), np.sin(theta)
-        ax = np.sum(self.link_lengths * (-alpha * s - omega ** 2 * c), axis=-1)
-        ay = np.sum(self.link_lengths * (alpha * c - omega ** 2 * s), axis=-1)
-        return np.stack([ax, ay], axis=-1)
+        return np.stack(self.wafer_acceleration_xy(q, qd, qdd), axis=-1)
+
+    def wafer_acceleration_xy(self, q, qd, qdd) -> tuple:
+        """
+        Return the wafer-centre acceleration's x and y components (m/s^2).
+
+        p = base + sum_j l_j (cos th_j, sin th_j) with th_j = q_1 + ... + q_j, so
+        p'' = sum_j l_j (a_j (-sin th_j, cos th_j) - w_j^2 (cos th_j, sin th_j)), w and a
+        being the cumulative joint velocities and accelerations. Arrays or autodiff Duals.
+        """
+        theta, omega, alpha = (ad.cumsum(x, -1) for x in (q, qd, qdd))
+        c, s = ad.cos(theta), ad.sin(theta)
+        spin = omega * omega
+        ax = ad.total((-alpha * s - spin * c) * self.link_lengths, -1)
+        ay = ad.total((alpha * c - spin * s) * self.link_lengths, -1)
+        return ax, ay
 
     def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:
         """

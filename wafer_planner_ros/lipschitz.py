@@ -38,3 +38,21 @@ def joint_constants(link_lengths, body_radii) -> np.ndarray:
 def box_half_widths(clearance: float, constants: np.ndarray) -> np.ndarray:
     """Return the safe box half-widths dq_i = d / (n c_i) around a configuration (Eq. 3)."""
     return clearance / (len(constants) * np.asarray(constants, float))
+
+
+def body_box_half_widths(body_clearance: np.ndarray, constants: np.ndarray) -> np.ndarray:
+    """
+    Return safe box half-widths from per-body clearances d_k and constants C (B, 3).
+
+    **Beyond** Eq. 3: dq_i = min over the bodies k that joint i moves of
+    d_k / (n_k C[k, i]), n_k being the number of joints that move body k. Every body then
+    moves less than its own clearance: sum_i C[k, i] dq_i <= sum_i d_k / n_k = d_k. Since
+    d_k >= min_k d_k, n_k <= n and C[k, i] <= c_i, the box contains the paper's.
+    """
+    constants = np.asarray(constants, float)
+    moved = constants > 0.0
+    joints_per_body = moved.sum(axis=1, keepdims=True)
+    with np.errstate(divide='ignore'):
+        widths = np.where(moved, np.asarray(body_clearance, float)[:, None]
+                          / (joints_per_body * constants), np.inf)
+    return widths.min(axis=0)

@@ -1,0 +1,268 @@
+"""
+The planning pipeline: request -> roadmap path -> corridor -> spline -> timing -> verified.
+
+``Planner.plan(start, goal)`` takes a station name or three joint angles for each end. When
+a station allows both elbow branches every combination is planned and the one with the
+shortest cycle time is returned (SPEC section 3). Every returned trajectory has passed
+``verify``; a request that cannot be answered raises ``PlanningError`` with its code.
+"""
+
+from dataclasses import dataclass, field, replace
+import logging
+import time
+from typing import Mapping, Optional, Tuple
+
+import numpy as np
+
+from wafer_planner_ros.bspline import CubicBSpline
+from wafer_planner_ros.corridor import build_corridor, simplify
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.search import find_path
+from wafer_planner_ros.shortcut import shortcut
+from wafer_planner_ros.timing import KinematicLimits, optimise, Timing, TimingProblem
+from wafer_planner_ros.verify import Verification, verify
+
+logger = logging.getLogger(__name__)
+
+STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify')
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """How trajectories are made. ``PlannerSettings.paper()`` is the paper's pipeline."""
+
+    sample_period: float = 0.01
+    """Seconds between the returned samples (the exact final point is added)."""
+    shortcut: bool = True
+    """Shorten the roadmap path with certified shortcuts (beyond the paper)."""
+    per_body_boxes: bool = True
+    """Size the safe boxes per body (beyond the paper; False: Eq. 3)."""
+    extra_points: int = 1
+    """Control points added on every straight stretch (beyond the paper)."""
+
+    def __post_init__(self):
+        """Reject unusable settings."""
+        if not (isinstance(self.sample_period, (int, float)) and 0 < self.sample_period <= 1):
+            raise ValueError(f'sample_period must be in (0, 1] s, got {self.sample_period!r}')
+        if not isinstance(self.extra_points, int) or self.extra_points < 0:
+            raise ValueError(f'extra_points must be an integer >= 0, got {self.extra_points!r}')
+
+    @classmethod
+    def paper(cls, sample_period: float = 0.01) -> 'PlannerSettings':
+        """Return the settings of the paper's exact pipeline, for comparison."""
+        return cls(sample_period=sample_period, shortcut=False, per_body_boxes=False,
+                   extra_points=0)
+
+
+@dataclass(frozen=True, eq=False)
+class Endpoint:
+    """A resolved start or goal: its label and candidate configurations."""
+
+    label: str
+    configs: Tuple[Tuple[Optional[int], np.ndarray], ...]
+    """(elbow branch or None for a joint request, q)."""
+
+
+@dataclass(frozen=True, eq=False)
+class PlanResult:
+    """A verified trajectory and everything measured while making it."""
+
+    start: Endpoint
+    goal: Endpoint
+    start_q: np.ndarray
+    goal_q: np.ndarray
+    branches: Tuple[Optional[int], Optional[int]]
+    """The elbow branches used at start and goal (None for joint requests)."""
+    spline: CubicBSpline
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    roadmap_path: np.ndarray
+    """(P, 3) the A* path from the roadmap."""
+    path: np.ndarray
+    """(P', 3) the path the corridor was built on (after shortcuts)."""
+    timing: Timing
+    verification: Optional[Verification]
+    """The dense check; None only inside the planner, before it has run."""
+    metrics: Mapping = field(default_factory=dict)
+    timings_ms: Mapping = field(default_factory=dict)
+    warnings: Tuple[str, ...] = ()
+
+    @property
+    def cycle_time(self) -> float:
+        """Return the trajectory's duration (s)."""
+        return self.spline.duration
+
+    @property
+    def initial_cycle_time(self) -> float:
+        """Return the duration of the λ-scaled start point (the paper's initial point)."""
+        return float(self.timing.initial_intervals.sum())
+
+
+class Planner:
+    """Plans on one cell with one roadmap."""
+
+    def __init__(self, cell, roadmap, settings: PlannerSettings = PlannerSettings()):
+        """Keep the cell, its roadmap and the settings."""
+        self.cell = cell
+        self.roadmap = roadmap
+        self.settings = settings
+        self.limits = KinematicLimits.of(cell.robot)
+
+    def endpoint(self, value, role: str) -> Endpoint:
+        """Resolve a station name or three joint angles; raise PlanningError if unusable."""
+        robot = self.cell.robot
+        if isinstance(value, str):
+            station = self.cell.stations.get(value)
+            if station is None:
+                raise PlanningError(ErrorCode.UNKNOWN_STATION,
+                                    f'{role} {value!r} is not a station of cell '
+                                    f'{self.cell.name} ({", ".join(sorted(self.cell.stations))})')
+            joints = 'joints' in station.spec
+            return Endpoint(value, tuple((None if joints else c.elbow, c.q)
+                                         for c in station.configs))
+        try:
+            q = np.asarray(value, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                f'{role} {value!r} is neither a station nor joint angles') from None
+        if q.size != len(robot.joint_names):
+            raise PlanningError(ErrorCode.JOINT_MISMATCH,
+                                f'{role} has {q.size} joint values; the robot has '
+                                f'{len(robot.joint_names)} ({", ".join(robot.joint_names)})')
+        if not np.all(np.isfinite(q)):
+            raise PlanningError(ErrorCode.NOT_FINITE, f'{role} {q.tolist()} is not finite')
+        lower, upper = robot.limits.position.T
+        for j in np.nonzero((q < lower) | (q > upper))[0]:
+            raise PlanningError(ErrorCode.OUT_OF_LIMITS,
+                                f'{role} joint {robot.joint_names[j]} = {q[j]} rad is outside '
+                                f'[{lower[j]}, {upper[j]}]')
+        model = self.cell.clearance_model
+        if model.clearance(q)[0] <= 0.0:
+            contact = model.contact(q)
+            code = ErrorCode.START_IN_COLLISION if role == 'start' else \
+                ErrorCode.GOAL_IN_COLLISION
+            raise PlanningError(code, f'{role} {q.tolist()} is in collision '
+                                      f'({contact.body} vs {contact.obstacle})')
+        return Endpoint(','.join(f'{v:g}' for v in q), ((None, q),))
+
+    def plan(self, start, goal, deadline: Optional[float] = None) -> PlanResult:
+        """
+        Return the verified trajectory from start to goal with the shortest cycle time.
+
+        ``deadline``: a ``time.monotonic()`` instant after which the request gives up with
+        TIMEOUT. Raises PlanningError with the code of the first reason it cannot answer.
+        """
+        begun = time.perf_counter()
+        a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
+        stage_ms = dict.fromkeys(STAGES, 0.0)
+        candidates, failure = [], None
+        for elbow_a, qa in a.configs:
+            for elbow_b, qb in b.configs:
+                if np.array_equal(qa, qb):
+                    raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                        f'start and goal are the same configuration '
+                                        f'{qa.tolist()}')
+                _check_deadline(deadline)
+                try:
+                    candidates.append(self._timed_pair(a, b, qa, qb, (elbow_a, elbow_b),
+                                                       stage_ms))
+                except PlanningError as exc:
+                    failure = failure or exc
+        # Shortest cycle first; only what is returned needs verifying.
+        for result in sorted(candidates, key=lambda r: r.cycle_time):
+            _check_deadline(deadline)
+            try:
+                result = self._verified(result, stage_ms)
+            except PlanningError as exc:
+                failure = failure or exc
+                continue
+            total = (time.perf_counter() - begun) * 1000.0
+            metrics = dict(result.metrics, candidates=len(candidates))
+            return replace(result, metrics=metrics, timings_ms=dict(stage_ms, total=total))
+        raise failure
+
+    def _timed_pair(self, a, b, qa, qb, branches, stage_ms) -> PlanResult:
+        """Return the (not yet verified) trajectory between two configurations."""
+        cell, model, lipschitz = self.cell, self.cell.clearance_model, self.cell.robot.lipschitz
+        clock = _Clock(stage_ms)
+        found = find_path(self.roadmap, model, lipschitz, qa, qb, clock=clock)
+        if found is None:
+            raise PlanningError(ErrorCode.NO_PATH,
+                                f'no path from {a.label} to {b.label} in the roadmap '
+                                f'({self.roadmap.node_count} nodes): connect more nodes or '
+                                'check the cell')
+        roadmap_path = simplify(found[0])
+        path = shortcut(roadmap_path, model, lipschitz) if self.settings.shortcut \
+            else roadmap_path
+        corridor = build_corridor(path, model.body_clearance(path), lipschitz,
+                                  per_body=self.settings.per_body_boxes,
+                                  extra=self.settings.extra_points)
+        clock.lap('corridor')
+        problem = TimingProblem(corridor.control_points, cell.robot.arm, self.limits)
+        clock.lap('spline')
+        timing = optimise(problem)
+        spline = CubicBSpline.from_intervals(corridor.control_points, timing.intervals)
+        clock.lap('optimise')
+        period = self.settings.sample_period
+        times = np.append(np.arange(0.0, spline.duration, period), spline.duration)
+        positions = spline.evaluate(times)
+        positions[-1] = qb  # exact, as verified
+        warnings = () if timing.optimised else (
+            f'time optimisation failed ({timing.message}); returning the λ-scaled timing',)
+        wafer = cell.robot.arm.wafer_center(spline.evaluate(np.linspace(0, spline.duration,
+                                                                        2001)))
+        joint = spline.evaluate(np.linspace(0, spline.duration, 2001))
+        metrics = {
+            'cycle_time': spline.duration,
+            'initial_cycle_time': float(timing.initial_intervals.sum()),
+            'lambda': timing.scale,
+            'optimised': timing.optimised,
+            'solver_iterations': timing.iterations,
+            'constraint_rounds': timing.rounds,
+            'wafer_samples': timing.samples,
+            'joint_path_length': float(np.linalg.norm(np.diff(joint, axis=0), axis=1).sum()),
+            'wafer_path_length': float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()),
+            'roadmap_path_vertices': len(roadmap_path),
+            'path_vertices': len(path),
+            'control_points': len(corridor.control_points),
+            'branches': list(branches),
+        }
+        return PlanResult(
+            start=a, goal=b, start_q=qa, goal_q=qb, branches=branches, spline=spline,
+            times=times, positions=positions, velocities=spline.evaluate(times, 1),
+            accelerations=spline.evaluate(times, 2), roadmap_path=roadmap_path, path=path,
+            timing=timing, verification=None, metrics=metrics, warnings=warnings)
+
+    def _verified(self, result: PlanResult, stage_ms) -> PlanResult:
+        """Return the result with its verification; raise VERIFICATION_FAILED if it fails."""
+        clock = _Clock(stage_ms)
+        checked = verify(result.spline, self.cell, result.start_q, result.goal_q)
+        clock.lap('verify')
+        if not checked.ok:
+            raise PlanningError(ErrorCode.VERIFICATION_FAILED,
+                                f'the trajectory {result.start.label} -> {result.goal.label} '
+                                'failed verification: ' + '; '.join(checked.problems))
+        metrics = dict(result.metrics, min_clearance=checked.min_clearance,
+                       limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk))
+        return replace(result, verification=checked, metrics=metrics)
+
+
+class _Clock:
+    """Add the time since the last lap to a named stage."""
+
+    def __init__(self, totals: dict):
+        self.totals = totals
+        self.last = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.totals[stage] += (now - self.last) * 1000.0
+        self.last = now
+
+
+def _check_deadline(deadline: Optional[float]) -> None:
+    if deadline is not None and time.monotonic() > deadline:
+        raise PlanningError(ErrorCode.TIMEOUT, 'planning did not finish before its deadline')
+

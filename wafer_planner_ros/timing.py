@@ -1,0 +1,225 @@
+"""
+Time optimisation of the knot intervals (paper sections 4.3 and 5).
+
+Variables: the durations h of the spline's spans. Objective: the total time sum(h)
+(Eq. 11). Constraints, all as ``1 - (x / (MARGIN * limit))**2 >= 0``:
+
+- joint velocity and acceleration control points (Eq. 6-8), and jerk control points when
+  the cell sets a jerk limit; by the convex-hull property these bound the curve everywhere;
+- the wafer-centre acceleration on x and y (Eq. 9), and on |a| when the cell sets
+  ``wafer_acceleration_norm_limit``, at constraint samples. The paper samples at the knots
+  only, which lets the limit be exceeded between them; **beyond the paper** each solution
+  is checked densely (every ``DENSE_STEP`` seconds) and the worst point of every span that
+  exceeds the limit becomes a new sample, then the problem is solved again;
+- ``h >= MIN_INTERVAL``: Eq. 10 as printed would force every span to last the whole
+  straight-line time, so it is read as a small positive lower bound.
+
+The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ computed from a
+dense sample of the wafer acceleration, so that it is feasible; SLSQP then solves with
+exact gradients (forward-mode ``autodiff`` through the B-spline and the kinematics). If the
+solver fails, or its answer still exceeds a limit after ``MAX_ROUNDS`` rounds of added
+samples, the λ-scaled timing is returned with the reason.
+
+Limits are tightened by ``MARGIN`` inside the optimiser so that what lies between samples,
+and the solver's own tolerance, stay below the true limits that verification applies.
+"""
+
+from dataclasses import dataclass
+import logging
+from typing import Optional
+
+import numpy as np
+from scipy.optimize import minimize
+
+from wafer_planner_ros import autodiff as ad
+from wafer_planner_ros.bspline import basis, combine, DEGREE, derivative_points
+from wafer_planner_ros.bspline import knots_from_intervals
+
+logger = logging.getLogger(__name__)
+
+MARGIN = 0.999
+MIN_INTERVAL = 1e-3   # s
+DENSE_STEP = 1e-3     # s
+MAX_ROUNDS = 6
+
+
+@dataclass(frozen=True, eq=False)
+class KinematicLimits:
+    """The limits a trajectory must meet."""
+
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    wafer: np.ndarray
+    """Wafer-centre acceleration limit on x and y (m/s^2)."""
+    jerk: Optional[np.ndarray] = None
+    wafer_norm: Optional[float] = None
+
+    @classmethod
+    def of(cls, robot) -> 'KinematicLimits':
+        """Return the limits of a cell's robot."""
+        return cls(velocity=robot.limits.velocity, acceleration=robot.limits.acceleration,
+                   wafer=robot.wafer_acceleration_limit, jerk=robot.limits.jerk,
+                   wafer_norm=robot.wafer_acceleration_norm_limit)
+
+
+@dataclass(frozen=True, eq=False)
+class Timing:
+    """The outcome of the time optimisation."""
+
+    intervals: np.ndarray
+    """Span durations (s) of the returned trajectory."""
+    initial_intervals: np.ndarray
+    """The λ-scaled start point (s)."""
+    scale: float
+    """λ of Eq. 12."""
+    optimised: bool
+    """False when the λ-scaled timing is returned instead (see ``message``)."""
+    iterations: int
+    """Solver iterations over all rounds."""
+    rounds: int
+    samples: int
+    """Wafer-acceleration constraint samples in the last round."""
+    message: str = ''
+
+
+class TimingProblem:
+    """The knot-interval optimisation of one set of control points."""
+
+    def __init__(self, control_points: np.ndarray, arm, limits: KinematicLimits):
+        """Set up the problem for control points (n + 1, 3)."""
+        self.points = np.asarray(control_points, float)
+        self.spans = len(self.points) - DEGREE
+        self.arm = arm
+        self.limits = limits
+
+    def states(self, intervals, span: np.ndarray, fraction: np.ndarray):
+        """Return q, q', q'' at a fraction of the given spans (arrays, or Duals of h)."""
+        knots = knots_from_intervals(intervals)
+        index = span + DEGREE  # knot index where the span starts
+        t = knots[index] + (knots[index + 1] - knots[index]) * fraction
+        velocity = derivative_points(self.points, knots, DEGREE)
+        acceleration = derivative_points(velocity, knots[1:-1], DEGREE - 1)
+        q = combine(basis(knots, index, t, DEGREE), self.points, index, DEGREE)
+        qd = combine(basis(knots[1:-1], index - 1, t, 2), velocity, index - 1, 2)
+        qdd = combine(basis(knots[2:-2], index - 2, t, 1), acceleration, index - 2, 1)
+        return q, qd, qdd
+
+    def control_derivatives(self, intervals) -> list:
+        """Return the velocity, acceleration (and jerk) control points."""
+        knots = knots_from_intervals(intervals)
+        out = [derivative_points(self.points, knots, DEGREE)]
+        out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
+        if self.limits.jerk is not None:
+            out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
+        return out
+
+    def constraints(self, intervals, span, fraction):
+        """Return the constraint values g >= 0 (array, or Dual of h) with the margin."""
+        bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
+        parts = [1.0 - _square(points / (MARGIN * limit))
+                 for points, limit in zip(self.control_derivatives(intervals), bounds)]
+        ax, ay = self.arm.wafer_acceleration_xy(*self.states(intervals, span, fraction))
+        parts.append(1.0 - _square(ax / (MARGIN * self.limits.wafer[0])))
+        parts.append(1.0 - _square(ay / (MARGIN * self.limits.wafer[1])))
+        if self.limits.wafer_norm is not None:
+            parts.append(1.0 - (ax * ax + ay * ay) / (MARGIN * self.limits.wafer_norm) ** 2)
+        if isinstance(intervals, ad.Dual):
+            return ad.concatenate(parts)
+        return np.concatenate([np.ravel(p) for p in parts])
+
+    def dense_wafer_ratio(self, intervals: np.ndarray) -> tuple:
+        """Return (ratio, span, fraction): the worst of x, y, |a| every DENSE_STEP seconds."""
+        span, fraction = dense_grid(intervals)
+        ax, ay = self.arm.wafer_acceleration_xy(*self.states(intervals, span, fraction))
+        ratio = np.maximum(np.abs(ax) / self.limits.wafer[0], np.abs(ay) / self.limits.wafer[1])
+        if self.limits.wafer_norm is not None:
+            ratio = np.maximum(ratio, np.hypot(ax, ay) / self.limits.wafer_norm)
+        return ratio, span, fraction
+
+    def scale_factor(self, intervals: np.ndarray) -> float:
+        """Return λ of Eq. 12 for a timing (wafer acceleration from the dense grid)."""
+        bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
+        ratios = [1.0]
+        for order, (points, limit) in enumerate(zip(self.control_derivatives(intervals),
+                                                    bounds)):
+            peak = float(np.max(np.abs(points) / (MARGIN * limit), initial=0.0))
+            ratios.append(peak ** (1.0 / (order + 1)))  # speed scales 1/λ, accel 1/λ², ...
+        wafer = float(self.dense_wafer_ratio(intervals)[0].max()) / MARGIN
+        ratios.append(np.sqrt(wafer))
+        return max(ratios)
+
+
+def _square(x):
+    return x * x
+
+
+def dense_grid(intervals: np.ndarray, step: float = DENSE_STEP) -> tuple:
+    """Return (span, fraction) of times at most ``step`` apart, including every knot."""
+    counts = np.maximum(np.ceil(intervals / step).astype(int), 1)
+    span = np.repeat(np.arange(len(intervals)), counts)
+    fraction = (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)) \
+        / np.repeat(counts, counts)
+    return np.append(span, len(intervals) - 1), np.append(fraction, 1.0)
+
+def initial_intervals(problem: TimingProblem) -> np.ndarray:
+    """
+    Return the uniform timing of the paper's start point, before λ-scaling.
+
+    The total is the straight-line time of the slowest joint, max_j |qG - qI|_j / LV_j (the
+    paper prints min_j, which is zero when a joint does not move); at least 0.01 s.
+    """
+    travel = np.abs(problem.points[-1] - problem.points[0]) / problem.limits.velocity
+    total = max(float(travel.max()), 0.01)
+    return np.full(problem.spans, total / problem.spans)
+
+
+def optimise(problem: TimingProblem) -> Timing:
+    """Return the optimised timing of the problem (see the module's description)."""
+    uniform = initial_intervals(problem)
+    scale = problem.scale_factor(uniform)
+    start = scale * uniform
+    # The paper's samples, every knot, and the middle of every span to begin with.
+    span = np.append(np.repeat(np.arange(problem.spans), 2), problem.spans - 1)
+    fraction = np.append(np.tile([0.0, 0.5], problem.spans), 1.0)
+    intervals, iterations, message = start, 0, ''
+    for rounds in range(1, MAX_ROUNDS + 1):
+        result = _solve(problem, intervals, span, fraction)
+        logger.debug('round %d: %s (%d iterations, T = %.4f s)', rounds, result.message,
+                     result.nit, result.x.sum())
+        iterations += result.nit
+        if not result.success and not np.all(np.isfinite(result.x)):
+            message = f'solver failed: {result.message}'
+            break
+        intervals = np.maximum(result.x, MIN_INTERVAL)
+        if problem.constraints(intervals, span, fraction).min() < -1e-6:
+            message = f'solver ended infeasible: {result.message}'
+            break
+        ratio, dense_span, dense_fraction = problem.dense_wafer_ratio(intervals)
+        over = ratio > MARGIN * (1.0 + 2e-4)
+        if not over.any():
+            return Timing(intervals, start, scale, True, iterations, rounds, len(span))
+        # The worst dense point of every span that goes over becomes a constraint sample.
+        worst = np.zeros(problem.spans, dtype=int) - 1
+        peak = np.zeros(problem.spans)
+        for k in np.nonzero(over)[0]:
+            if ratio[k] > peak[dense_span[k]]:
+                peak[dense_span[k]], worst[dense_span[k]] = ratio[k], k
+        worst = worst[worst >= 0]
+        span = np.append(span, dense_span[worst])
+        fraction = np.append(fraction, dense_fraction[worst])
+    else:
+        message = f'wafer acceleration still over the limit after {MAX_ROUNDS} rounds'
+    logger.warning('time optimisation fell back to the λ-scaled timing: %s', message)
+    return Timing(start, start, scale, False, iterations, rounds, len(span), message)
+
+
+def _solve(problem: TimingProblem, start: np.ndarray, span, fraction):
+    # Line searches need values only; gradients (Duals, several times dearer) on request.
+    ones = np.ones(problem.spans)
+    return minimize(lambda h: float(h.sum()), start, jac=lambda h: ones, method='SLSQP',
+                    bounds=[(MIN_INTERVAL, None)] * problem.spans,
+                    constraints=[{'type': 'ineq',
+                                  'fun': lambda h: problem.constraints(h, span, fraction),
+                                  'jac': lambda h: problem.constraints(
+                                      ad.Dual.variables(h), span, fraction).d}],
+                    options={'maxiter': 200, 'ftol': 1e-7})

@@ -1,0 +1,89 @@
+"""
+Verification of a trajectory before it leaves the planner (SPEC section 3.9).
+
+Limits are checked every ``LIMIT_STEP`` seconds, collisions at configurations no more than
+``COLLISION_STEP`` rad apart in any joint: the time step between collision checks is
+``COLLISION_STEP / max_i v_i``, v_i being the largest velocity control point of joint i,
+which bounds the joint's speed everywhere (convex-hull property). Also checked: the start
+and goal are hit exactly, and velocity and acceleration are zero at both ends.
+"""
+
+from dataclasses import dataclass, field
+from typing import Mapping, Tuple
+
+import numpy as np
+
+LIMIT_STEP = 1e-3      # s
+COLLISION_STEP = 1e-3  # rad
+END_TOLERANCE = 1e-9   # rad/s, rad/s^2: "zero" at the ends, up to rounding
+
+
+@dataclass(frozen=True)
+class Verification:
+    """What the dense check found."""
+
+    problems: Tuple[str, ...]
+    """Human-readable failures; empty when the trajectory is good."""
+    ratios: Mapping[str, float] = field(default_factory=dict)
+    """Largest |value| / limit of each limit (<= 1 passes)."""
+    min_clearance: float = np.inf
+    """Smallest robot clearance met along the motion (m)."""
+    peak_jerk: Tuple[float, ...] = ()
+    """Largest |jerk| of each joint (rad/s^3)."""
+    limit_samples: int = 0
+    collision_samples: int = 0
+
+    @property
+    def ok(self) -> bool:
+        """Return whether the trajectory passed."""
+        return not self.problems
+
+
+def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
+    """Check a spline trajectory of ``cell``'s robot from start to goal."""
+    robot = cell.robot
+    limits = robot.limits
+    duration = spline.duration
+    t = np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
+    q, qd, qdd, qddd = (spline.evaluate(t, order) for order in range(4))
+    wafer = robot.arm.wafer_acceleration(q, qd, qdd)
+    ratios = {
+        'velocity': _ratio(qd, limits.velocity),
+        'acceleration': _ratio(qdd, limits.acceleration),
+        'wafer_x': _ratio(wafer[:, 0], robot.wafer_acceleration_limit[0]),
+        'wafer_y': _ratio(wafer[:, 1], robot.wafer_acceleration_limit[1]),
+    }
+    if limits.jerk is not None:
+        ratios['jerk'] = _ratio(qddd, limits.jerk)
+    if robot.wafer_acceleration_norm_limit is not None:
+        ratios['wafer_norm'] = float(np.max(np.hypot(wafer[:, 0], wafer[:, 1]))
+                                     / robot.wafer_acceleration_norm_limit)
+    problems = [f'{name} reaches {ratio:.4f} x its limit'
+                for name, ratio in ratios.items() if ratio > 1.0]
+    lower, upper = limits.position.T
+    outside = np.nonzero(np.any((q < lower) | (q > upper), axis=0))[0]
+    problems += [f'joint {robot.joint_names[j]} leaves its position limits' for j in outside]
+    if not np.array_equal(q[0], start) or not np.array_equal(q[-1], goal):
+        problems.append('the trajectory does not start and end exactly at start and goal')
+    ends = np.abs(np.concatenate([qd[[0, -1]], qdd[[0, -1]]])).max()
+    if ends > END_TOLERANCE:
+        problems.append(f'velocity or acceleration at an end is {ends:.3g}, not zero')
+    clearance, checks = dense_clearance(spline, cell.clearance_model)
+    if clearance <= 0.0:
+        problems.append(f'collision (clearance {clearance * 1000:.2f} mm)')
+    return Verification(problems=tuple(problems), ratios=ratios, min_clearance=clearance,
+                        peak_jerk=tuple(np.abs(qddd).max(axis=0).tolist()),
+                        limit_samples=len(t), collision_samples=checks)
+
+
+def _ratio(values: np.ndarray, limit) -> float:
+    return float(np.max(np.abs(values) / limit))
+
+
+def dense_clearance(spline, model) -> tuple:
+    """Return (smallest clearance, checks) at configurations <= COLLISION_STEP rad apart."""
+    speed = np.abs(spline.derivative(1)[0]).max()  # bounds every joint's speed everywhere
+    duration = spline.duration
+    count = int(np.ceil(duration * speed / COLLISION_STEP)) + 1
+    q = spline.evaluate(np.linspace(0.0, duration, max(count, 2)))
+    return float(model.clearance(q).min()), len(q)
