@@ -35,7 +35,9 @@ test: $(STAMP)
 	$(COLCON) test-result --test-result-base .colcon/build --verbose
 
 bench: $(STAMP)
+	$(PY) -m pip install --disable-pip-version-check -q -r bench/requirements.txt
 	$(ENV) $(PY) bench/bench_roadmap.py
+	$(ENV) $(PY) bench/bench_plan.py
 
 clean:
 	rm -rf .colcon

@@ -25,6 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'wafer-roadmap = wafer_planner_ros.cli.roadmap:entry_point',
+            'wafer-plan = wafer_planner_ros.cli.plan:entry_point',
         ],
     },
 )

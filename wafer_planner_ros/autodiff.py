@@ -84,7 +84,7 @@ class Dual:
         inverse = 1.0 / self.v
         return Dual(inverse, -self.d * (inverse * inverse)[..., None])
 
-    def sum(self, axis) -> 'Dual':
+    def total(self, axis) -> 'Dual':
         """Return the sum along a value axis."""
         return Dual(self.v.sum(axis=axis), self.d.sum(axis=_grad_axis(axis)))
 
@@ -103,14 +103,14 @@ def _grad_axis(axis: int) -> int:
 
 
 def sin(x):
-    """Return sin(x) for arrays or Duals."""
+    """Return the sine of an array or Dual."""
     if isinstance(x, Dual):
         return Dual(np.sin(x.v), np.cos(x.v)[..., None] * x.d)
     return np.sin(x)
 
 
 def cos(x):
-    """Return cos(x) for arrays or Duals."""
+    """Return the cosine of an array or Dual."""
     if isinstance(x, Dual):
         return Dual(np.cos(x.v), -np.sin(x.v)[..., None] * x.d)
     return np.cos(x)
@@ -123,7 +123,7 @@ def cumsum(x, axis: int):
 
 def total(x, axis: int):
     """Return the sum of an array or Dual along a value axis."""
-    return x.sum(axis) if isinstance(x, Dual) else np.sum(x, axis=axis)
+    return x.total(axis) if isinstance(x, Dual) else np.sum(x, axis=axis)
 
 
 def concatenate(parts: list) -> Dual:

@@ -126,7 +126,8 @@ class Planner:
             q = np.asarray(value, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise PlanningError(ErrorCode.INVALID_REQUEST,
-                                f'{role} {value!r} is neither a station nor joint angles') from None
+                                f'{role} {value!r} is neither a station nor joint '
+                                'angles') from None
         if q.size != len(robot.joint_names):
             raise PlanningError(ErrorCode.JOINT_MISMATCH,
                                 f'{role} has {q.size} joint values; the robot has '
@@ -265,4 +266,3 @@ class _Clock:
 def _check_deadline(deadline: Optional[float]) -> None:
     if deadline is not None and time.monotonic() > deadline:
         raise PlanningError(ErrorCode.TIMEOUT, 'planning did not finish before its deadline')
-

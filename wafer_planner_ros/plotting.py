@@ -81,3 +81,54 @@ def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> N
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_trajectory(cell, result, path, outlines: int = 14) -> None:
+    """Write a PNG of a plan like the paper's Figs. 10-13: motion, joints, wafer."""
+    robot, spline = cell.robot, result.spline
+    t = np.linspace(0.0, spline.duration, 1500)
+    q, qd, qdd = (spline.evaluate(t, order) for order in range(3))
+    wafer = robot.arm.wafer_acceleration(q, qd, qdd)
+    fig = plt.figure(figsize=(16, 9))
+    grid = fig.add_gridspec(3, 3)
+    ax = fig.add_subplot(grid[:2, :2])
+    draw_cell(ax, cell)
+    colours = plt.get_cmap('viridis')
+    for k, tk in enumerate(np.linspace(0.0, spline.duration, outlines)):
+        draw_robot(ax, robot, spline.evaluate(tk)[0], colour=colours(k / (outlines - 1)),
+                   alpha=0.55)
+    centre = robot.arm.wafer_center(q)
+    ax.plot(centre[:, 0], centre[:, 1], color='tab:red', linewidth=2, label='wafer centre')
+    ax.legend(loc='upper right')
+    ax.set_title(f'{result.start.label} -> {result.goal.label}: cycle time '
+                 f'{result.cycle_time:.3f} s (λ-scaled {result.initial_cycle_time:.3f} s), '
+                 f'branches {list(result.branches)}')
+    panels = [(grid[0, 2], q, None, 'position (rad)'),
+              (grid[1, 2], qd, robot.limits.velocity, 'velocity (rad/s)'),
+              (grid[2, 2], qdd, robot.limits.acceleration, 'acceleration (rad/s²)')]
+    for spec, values, limit, label in panels:
+        axis = fig.add_subplot(spec)
+        for j, name in enumerate(robot.joint_names):
+            line, = axis.plot(t, values[:, j], label=name)
+            if limit is not None:
+                axis.axhline(limit[j], color=line.get_color(), linestyle='--', linewidth=0.8)
+                axis.axhline(-limit[j], color=line.get_color(), linestyle='--', linewidth=0.8)
+        axis.set_ylabel(label)
+        axis.legend(fontsize=7, loc='upper right')
+    axis.set_xlabel('t (s)')
+    wafer_axis = fig.add_subplot(grid[2, :2])
+    for k, name in enumerate('xy'):
+        line, = wafer_axis.plot(t, wafer[:, k], label=f'a_{name}')
+        limit = robot.wafer_acceleration_limit[k]
+        wafer_axis.axhline(limit, color=line.get_color(), linestyle='--', linewidth=0.8)
+        wafer_axis.axhline(-limit, color=line.get_color(), linestyle='--', linewidth=0.8)
+    if robot.wafer_acceleration_norm_limit is not None:
+        wafer_axis.plot(t, np.hypot(wafer[:, 0], wafer[:, 1]), color='black', label='|a|')
+        wafer_axis.axhline(robot.wafer_acceleration_norm_limit, color='black', linestyle='--',
+                           linewidth=0.8)
+    wafer_axis.set_ylabel('wafer acceleration (m/s²)')
+    wafer_axis.set_xlabel('t (s)')
+    wafer_axis.legend(fontsize=8, loc='upper right')
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -161,6 +161,7 @@ def dense_grid(intervals: np.ndarray, step: float = DENSE_STEP) -> tuple:
         / np.repeat(counts, counts)
     return np.append(span, len(intervals) - 1), np.append(fraction, 1.0)
 
+
 def initial_intervals(problem: TimingProblem) -> np.ndarray:
     """
     Return the uniform timing of the paper's start point, before λ-scaling.

@@ -1,0 +1,66 @@
+"""
+An independent check of a planned trajectory, sharing no code with the planner's own.
+
+The spline is evaluated by scipy's BSpline from the knots and control points as exported;
+the wafer acceleration comes from second differences of forward-kinematics positions (a
+weighted average of the true acceleration, so never above its peak); collisions are checked
+by python-fcl at configurations no more than 1 mrad apart in any joint.
+"""
+
+import numpy as np
+from scipy.interpolate import BSpline
+
+STEP = 1e-4  # s, time step of the checks
+
+
+def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
+    """Assert everything a user relies on; return the measured ratios."""
+    robot = cell.robot
+    knots = np.array(plan['spline']['knots'])
+    points = np.array(plan['spline']['control_points'])
+    curve = BSpline(knots, points, 3)
+    duration = knots[-1]
+    assert np.isclose(duration, plan['cycle_time'], rtol=0, atol=1e-12)
+    t = np.linspace(0.0, duration, int(np.ceil(duration / STEP)) + 1)
+    q, qd, qdd = curve(t), curve(t, 1), curve(t, 2)
+    # Start and goal exact; at rest at both ends.
+    assert np.array_equal(points[0], start) and np.array_equal(points[-1], goal)
+    assert np.allclose(q[[0, -1]], [start, goal], rtol=0, atol=1e-12)
+    # scipy's recursion divides by spans as short as 1 ms: zero comes out as ~1e-9.
+    assert np.abs(qd[[0, -1]]).max() < 1e-6 and np.abs(qdd[[0, -1]]).max() < 1e-6
+    # Joint limits.
+    lower, upper = robot.limits.position.T
+    assert np.all(q >= lower) and np.all(q <= upper)
+    ratios = {'velocity': float(np.max(np.abs(qd) / robot.limits.velocity)),
+              'acceleration': float(np.max(np.abs(qdd) / robot.limits.acceleration))}
+    # Wafer acceleration from positions only.
+    h = 1e-4
+    inner = t[(t > h) & (t < duration - h)]
+    centre = [_wafer_centre(robot, curve(inner + s)) for s in (-h, 0.0, h)]
+    wafer = (centre[0] - 2 * centre[1] + centre[2]) / h ** 2
+    ratios['wafer'] = float(np.max(np.abs(wafer) / robot.wafer_acceleration_limit))
+    if robot.wafer_acceleration_norm_limit is not None:
+        ratios['wafer_norm'] = float(np.max(np.hypot(*wafer.T))
+                                     / robot.wafer_acceleration_norm_limit)
+    for name, ratio in ratios.items():
+        assert ratio <= 1.0 + 1e-6, f'{name} reaches {ratio} x its limit'
+    # Collisions: consecutive checks at most 1 mrad apart.
+    assert np.abs(np.diff(q, axis=0)).max() <= 1e-3
+    assert not cell.fcl_model().in_collision_many(q).any()
+    # The samples are the spline's.
+    samples = plan['points']
+    ts = np.array([p['t'] for p in samples])
+    assert ts[0] == 0.0 and ts[-1] == duration and np.all(np.diff(ts) > 0)
+    for key, order, tolerance in (('q', 0, 1e-9), ('qd', 1, 1e-8), ('qdd', 2, 1e-6)):
+        assert np.allclose([p[key] for p in samples], curve(ts, order), rtol=0,
+                           atol=tolerance), key
+    assert np.array_equal(samples[-1]['q'], goal)
+    return ratios
+
+
+def _wafer_centre(robot, q):
+    """Return the wafer centre by summing the links: no planner code involved."""
+    theta = np.cumsum(q, axis=-1)
+    lengths = robot.link_lengths
+    return robot.base + np.stack([(lengths * np.cos(theta)).sum(-1),
+                                  (lengths * np.sin(theta)).sum(-1)], axis=-1)

@@ -1,0 +1,60 @@
+"""``wafer-plan``: one pair, all pairs, JSON schema, plots and exit codes."""
+
+import json
+
+from wafer_planner_ros.cli.common import run
+from wafer_planner_ros.cli.plan import main
+
+
+def _run(capsys, *argv):
+    code = run(main, list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_one_pair_as_json(roadmap_cache, capsys):
+    code, out, _ = _run(capsys, 'loadport2', 'loadlock2', '--cache-dir', str(roadmap_cache),
+                        '--json', '-')
+    assert code == 0
+    plan = json.loads(out)
+    for key in ('status', 'code', 'message', 'from', 'to', 'joint_names', 'cycle_time',
+                'initial_cycle_time', 'spline', 'points', 'path', 'metrics', 'timings_ms',
+                'roadmap'):
+        assert key in plan
+    assert plan['status'] == 'ok' and plan['from'] == 'loadport2'
+    assert set(plan['spline']) == {'degree', 'knots', 'control_points'}
+    assert set(plan['points'][0]) == {'t', 'q', 'qd', 'qdd'}
+    assert set(plan['roadmap']) == {'nodes', 'edges', 'hash', 'seed', 'cache_hit'}
+    assert plan['roadmap']['nodes'] >= 1500 and plan['roadmap']['seed'] == 0
+
+
+def test_joint_angles_and_plot(roadmap_cache, capsys, tmp_path, default_cell):
+    start = ','.join(str(v) for v in default_cell.stations['loadport1'].configs[0].q)
+    png = tmp_path / 'plan.png'
+    code, out, _ = _run(capsys, start, 'loadlock1', '--cache-dir', str(roadmap_cache),
+                        '--plot', str(png))
+    assert code == 0 and 'ok, cycle time' in out
+    assert png.read_bytes()[:4] == b'\x89PNG' and png.stat().st_size > 50_000
+
+
+def test_all_pairs_table_and_json_file(roadmap_cache, capsys, tmp_path):
+    out_file = tmp_path / 'pairs.json'
+    code, out, _ = _run(capsys, '--all-pairs', '--cache-dir', str(roadmap_cache), '--json',
+                        str(out_file))
+    assert code == 0
+    rows = json.loads(out_file.read_text())
+    assert len(rows) == 12 and all(r['status'] == 'ok' for r in rows)
+    pairs = {(r['from'], r['to']) for r in rows}
+    assert {('loadport1', 'loadlock2'), ('loadlock2', 'loadport1')} <= pairs
+    assert 'λ-scaled' in out and out.count(' ok ') == 12
+
+
+def test_planning_failure_exits_1_and_usage_errors_exit_2(roadmap_cache, capsys):
+    code, out, _ = _run(capsys, 'loadport9', 'loadlock1', '--cache-dir', str(roadmap_cache))
+    assert code == 1 and 'UNKNOWN_STATION' in out
+    code, _, err = _run(capsys, 'a,b,c', 'loadlock1', '--cache-dir', str(roadmap_cache))
+    assert code == 2 and 'neither a station' in err
+    code, _, err = _run(capsys, 'loadport1', '--cache-dir', str(roadmap_cache))
+    assert code == 2
+    code, _, err = _run(capsys, 'loadport1', 'loadlock1', '--sample-period', '0')
+    assert code == 2 and 'sample_period' in err

@@ -1,0 +1,110 @@
+"""The planner end to end, checked independently, and every error a user can provoke."""
+
+from independent import check
+import numpy as np
+import pytest
+
+from wafer_planner_ros.cache import load_or_build
+from wafer_planner_ros.cli.plan import station_pairs
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.planner import Planner, PlannerSettings, STAGES
+from wafer_planner_ros.report import plan_json, roadmap_json
+from wafer_planner_ros.roadmap import RoadmapSettings
+
+
+@pytest.fixture(scope='module')
+def planner(cell, roadmap_cache):
+    """Return a planner on each test cell's default roadmap."""
+    cached = load_or_build(cell, cache_dir=roadmap_cache)
+    return Planner(cell, cached.roadmap), roadmap_json(cached)
+
+
+def _plan(planner, start, goal):
+    p, info = planner
+    result = p.plan(start, goal)
+    return result, plan_json(result, info, p.cell.robot.joint_names)
+
+
+@pytest.mark.slow
+def test_every_station_pair_passes_the_independent_check(cell, planner):
+    for start, goal in station_pairs(cell):
+        result, plan = _plan(planner, start, goal)
+        check(cell, plan, result.start_q, result.goal_q)
+        assert result.cycle_time < result.initial_cycle_time
+        assert result.verification.ok and result.metrics['min_clearance'] > 0
+        # Both branches were candidates where the station allows both.
+        both = [len(cell.stations[n].configs) for n in (start, goal)]
+        assert result.metrics['candidates'] == both[0] * both[1]
+
+
+@pytest.mark.slow
+def test_random_free_start_goal_pairs_pass_the_independent_check(cell, planner):
+    rng = np.random.default_rng(61)
+    limits = cell.robot.limits.position
+    q = rng.uniform(limits[:, 0], limits[:, 1], (400, 3))
+    q = q[cell.clearance_model.clearance(q) > 0.005][:12]
+    planned = 0
+    for start, goal in zip(q[::2], q[1::2]):
+        try:
+            result, plan = _plan(planner, start, goal)
+        except PlanningError as exc:
+            assert exc.code is ErrorCode.NO_PATH
+            continue
+        planned += 1
+        check(cell, plan, start, goal)
+        assert result.cycle_time <= result.initial_cycle_time
+    assert planned >= 5
+
+
+def test_result_carries_samples_metrics_and_stage_timings(default_cell, default_roadmap):
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(sample_period=0.02))
+    result = planner.plan('loadport2', 'loadlock2')
+    assert np.allclose(np.diff(result.times[:-1]), 0.02)
+    assert result.times[-1] == result.cycle_time
+    assert np.array_equal(result.positions[-1], result.goal_q)
+    assert set(STAGES) | {'total'} == set(result.timings_ms)
+    for key in ('cycle_time', 'initial_cycle_time', 'joint_path_length', 'wafer_path_length',
+                'min_clearance', 'limit_ratios', 'peak_jerk', 'solver_iterations'):
+        assert key in result.metrics
+    assert max(result.metrics['limit_ratios'].values()) <= 1.0
+
+
+def test_the_papers_pipeline_stays_selectable(default_cell, default_roadmap):
+    result = Planner(default_cell, default_roadmap, PlannerSettings.paper()).plan(
+        'loadport2', 'loadlock2')
+    assert result.verification.ok
+    assert result.metrics['path_vertices'] == result.metrics['roadmap_path_vertices']
+
+
+@pytest.mark.parametrize('start, goal, code, words', [
+    ('loadport9', 'loadlock1', ErrorCode.UNKNOWN_STATION, "'loadport9'"),
+    ([0.1, 0.2], 'loadlock1', ErrorCode.JOINT_MISMATCH, '2 joint values'),
+    ('loadport1', [0.1, float('nan'), 0.0], ErrorCode.NOT_FINITE, 'not finite'),
+    ([0.0, 3.5, 0.0], 'loadlock1', ErrorCode.OUT_OF_LIMITS, 'elbow = 3.5'),
+    ([-np.pi / 2, 0.0, 0.0], 'loadlock1', ErrorCode.START_IN_COLLISION, 'elbow link'),
+    ('loadport1', [-np.pi / 2, 0.0, 0.0], ErrorCode.GOAL_IN_COLLISION, 'boundary'),
+    ('loadport1', 'loadport1', ErrorCode.INVALID_REQUEST, 'same configuration'),
+    ('loadport1', ['a', 'b', 'c'], ErrorCode.INVALID_REQUEST, 'neither a station'),
+])
+def test_each_error_code_names_the_offending_value(default_cell, default_roadmap, start,
+                                                   goal, code, words):
+    with pytest.raises(PlanningError) as info:
+        Planner(default_cell, default_roadmap).plan(start, goal)
+    assert info.value.code is code
+    assert words in info.value.message
+
+
+def test_no_path_in_a_roadmap_too_sparse_to_connect(default_cell):
+    sparse = load_or_build(default_cell, RoadmapSettings(nodes=5), seed=1,
+                           cache_dir=None).roadmap
+    assert len(set(sparse.components[[n for e in sparse.stations.values()
+                                      for _, n in e]])) > 1
+    with pytest.raises(PlanningError) as info:
+        Planner(default_cell, sparse).plan('loadport1', 'loadlock2')
+    assert info.value.code is ErrorCode.NO_PATH and 'loadport1' in info.value.message
+
+
+def test_a_passed_deadline_gives_timeout(default_cell, default_roadmap):
+    with pytest.raises(PlanningError) as info:
+        Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock1', deadline=0.0)
+    assert info.value.code is ErrorCode.TIMEOUT

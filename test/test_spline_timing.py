@@ -1,0 +1,112 @@
+"""B-spline evaluation and derivatives, the corridor's proof, and the time optimisation."""
+
+import numpy as np
+import pytest
+from scipy.interpolate import BSpline
+
+from wafer_planner_ros.autodiff import Dual
+from wafer_planner_ros.bspline import CubicBSpline
+from wafer_planner_ros.corridor import build_corridor
+from wafer_planner_ros.search import find_path
+from wafer_planner_ros.timing import KinematicLimits, MARGIN, optimise, TimingProblem
+
+
+@pytest.fixture()
+def spline():
+    """Return a random clamped spline with triple end points."""
+    rng = np.random.default_rng(71)
+    points = rng.normal(size=(10, 3))
+    points[1:3], points[-3:-1] = points[0], points[-1]
+    return CubicBSpline.from_intervals(points, rng.uniform(0.05, 0.4, 7))
+
+
+def test_evaluation_matches_scipy_for_every_derivative(spline):
+    reference = BSpline(spline.knots, spline.control_points, 3)
+    t = np.linspace(0.0, spline.duration, 777)
+    for order in range(4):
+        assert np.allclose(spline.evaluate(t, order), reference(t, order), atol=1e-10)
+
+
+def test_derivative_control_points_follow_eq_6_and_7(spline):
+    cp, t = spline.control_points, spline.knots
+    velocity, _, _ = spline.derivative(1)
+    expected = np.array([3 * (cp[i + 1] - cp[i]) / (t[i + 4] - t[i + 1])
+                         for i in range(len(cp) - 1)])
+    assert np.allclose(velocity, expected)
+    acceleration, _, _ = spline.derivative(2)
+    assert np.allclose(acceleration, [2 * (velocity[i + 1] - velocity[i]) / (t[i + 4] - t[i + 2])
+                                      for i in range(len(velocity) - 1)])
+    # Convex hull: the curve's velocity never exceeds its largest control point.
+    assert np.abs(spline.evaluate(np.linspace(0, spline.duration, 999), 1)).max() <= \
+        np.abs(velocity).max() + 1e-12
+
+
+def test_ends_are_exact_and_at_rest(spline):
+    assert np.array_equal(spline.evaluate(0.0)[0], spline.control_points[0])
+    assert np.allclose(spline.evaluate(spline.duration)[0], spline.control_points[-1],
+                       rtol=0, atol=1e-15)
+    for order in (1, 2):
+        assert np.abs(spline.evaluate([0.0, spline.duration], order)).max() < 1e-9
+
+
+def _station_corridor(cell, roadmap, start, goal):
+    model = cell.clearance_model
+    path = find_path(roadmap, model, cell.robot.lipschitz, cell.stations[start].configs[0].q,
+                     cell.stations[goal].configs[0].q)[0]
+    return build_corridor(path, model.body_clearance(path), cell.robot.lipschitz)
+
+
+def test_every_span_lies_in_a_safe_box_or_on_a_path_segment(default_cell, default_roadmap):
+    corridor = _station_corridor(default_cell, default_roadmap, 'loadport1', 'loadlock2')
+    points, path = corridor.control_points, corridor.path
+    boxes = list(zip(path[1:-1], corridor.half_widths))
+    for k in range(len(points) - 3):
+        hull = points[k:k + 4]
+        in_box = any(np.all(np.abs(hull - centre) <= half + 1e-12) for centre, half in boxes)
+        on_segment = any(_on_segment(hull, a, b) for a, b in zip(path[:-1], path[1:]))
+        assert in_box or on_segment, f'span {k} is neither in a box nor on a segment'
+    # The boxes hold only free configurations (fcl on random points inside them).
+    rng = np.random.default_rng(72)
+    reference = default_cell.fcl_model()
+    for centre, half in boxes:
+        q = centre + rng.uniform(-1, 1, (300, 3)) * half
+        assert not reference.in_collision_many(q).any()
+
+
+def _on_segment(points, a, b):
+    direction = b - a
+    s = (points - a) @ direction / (direction @ direction)
+    return np.all((s >= -1e-12) & (s <= 1 + 1e-12)) and np.allclose(
+        a + s[:, None] * direction, points, atol=1e-12)
+
+
+def test_constraint_gradients_are_exact(default_cell, default_roadmap):
+    corridor = _station_corridor(default_cell, default_roadmap, 'loadport2', 'loadlock1')
+    problem = TimingProblem(corridor.control_points, default_cell.robot.arm,
+                            KinematicLimits.of(default_cell.robot))
+    rng = np.random.default_rng(73)
+    h = rng.uniform(0.05, 0.3, problem.spans)
+    span = rng.integers(0, problem.spans, 25)
+    fraction = rng.random(25)
+    analytic = problem.constraints(Dual.variables(h), span, fraction)
+    assert np.allclose(analytic.v, problem.constraints(h, span, fraction))
+    eps = 1e-7
+    numeric = np.stack([(problem.constraints(h + eps * e, span, fraction)
+                         - problem.constraints(h - eps * e, span, fraction)) / (2 * eps)
+                        for e in np.eye(problem.spans)], axis=1)
+    assert np.allclose(analytic.d, numeric, rtol=1e-5, atol=1e-4)
+
+
+def test_lambda_start_is_feasible_and_the_optimum_is_faster(default_cell, default_roadmap):
+    corridor = _station_corridor(default_cell, default_roadmap, 'loadport3', 'loadlock1')
+    limits = KinematicLimits.of(default_cell.robot)
+    problem = TimingProblem(corridor.control_points, default_cell.robot.arm, limits)
+    timing = optimise(problem)
+    assert timing.optimised and timing.scale >= 1.0
+    for intervals in (timing.initial_intervals, timing.intervals):
+        spline = CubicBSpline.from_intervals(corridor.control_points, intervals)
+        velocity, acceleration = spline.derivative(1)[0], spline.derivative(2)[0]
+        assert np.all(np.abs(velocity) <= limits.velocity + 1e-12)
+        assert np.all(np.abs(acceleration) <= limits.acceleration + 1e-12)
+        assert problem.dense_wafer_ratio(intervals)[0].max() <= MARGIN * (1 + 2e-4)
+    assert timing.intervals.sum() < timing.initial_intervals.sum()

@@ -1,0 +1,135 @@
+"""``wafer-plan``: plan a verified, time-optimised trajectory between stations or angles."""
+
+import argparse
+from pathlib import Path
+import sys
+
+from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_FAILURE, EXIT_OK
+from wafer_planner_ros.cli.common import load_cell, roadmap_for, run, UsageError, write_json
+from wafer_planner_ros.errors import PlanningError
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.report import error_json, plan_json, roadmap_json
+
+
+def parse_end(text: str):
+    """Return a station name, or a list of floats for 'q1,q2,q3'."""
+    if ',' not in text:
+        return text
+    try:
+        return [float(v) for v in text.split(',')]
+    except ValueError:
+        raise UsageError(f'{text!r} is neither a station name nor comma-separated '
+                         'joint angles') from None
+
+
+def station_pairs(cell) -> list:
+    """Return every loadport->loadlock and loadlock->loadport pair."""
+    ports = sorted(n for n, s in cell.stations.items() if s.role == 'loadport')
+    locks = sorted(n for n, s in cell.stations.items() if s.role == 'loadlock')
+    return [(p, lk) for p in ports for lk in locks] + [(lk, p) for p in ports for lk in locks]
+
+
+def plan_one(planner, start, goal, info, joint_names) -> tuple:
+    """Return (result or None, JSON object) for one request."""
+    try:
+        result = planner.plan(start, goal)
+    except PlanningError as exc:
+        return None, error_json(exc.code.value, exc.message, start, goal, info)
+    return result, plan_json(result, info, joint_names)
+
+
+def table(rows: list) -> str:
+    """Return the --all-pairs table."""
+    lines = [f"{'pair':<24}{'status':<8}{'cycle s':>8}{'λ-scaled s':>11}{'gain':>7}"
+             f"{'path rad':>9}{'clear mm':>9}{'vel':>6}{'acc':>6}{'wafer':>7}{'ms':>8}"]
+    for row in rows:
+        pair = f"{row['from']}->{row['to']}"
+        if row['status'] != 'ok':
+            lines.append(f"{pair:<24}{row['code']}: {row['message']}")
+            continue
+        m, r = row['metrics'], row['metrics']['limit_ratios']
+        wafer = max(v for k, v in r.items() if k.startswith('wafer'))
+        lines.append(
+            f"{pair:<24}{'ok':<8}{row['cycle_time']:>8.3f}{row['initial_cycle_time']:>11.3f}"
+            f"{1 - row['cycle_time'] / row['initial_cycle_time']:>7.0%}"
+            f"{m['joint_path_length']:>9.2f}{m['min_clearance'] * 1000:>9.1f}"
+            f"{r['velocity']:>6.2f}{r['acceleration']:>6.2f}{wafer:>7.3f}"
+            f"{row['timings_ms']['total']:>8.1f}")
+    return '\n'.join(lines)
+
+
+def main(argv=None) -> int:
+    """Run wafer-plan."""
+    parser = argparse.ArgumentParser(prog='wafer-plan', description=__doc__.split('\n')[0])
+    parser.add_argument('start', nargs='?', metavar='FROM', help='station name or q1,q2,q3')
+    parser.add_argument('goal', nargs='?', metavar='TO', help='station name or q1,q2,q3')
+    parser.add_argument('--all-pairs', action='store_true',
+                        help='plan every loadport->loadlock and loadlock->loadport pair')
+    add_roadmap_options(parser)
+    parser.add_argument('--sample-period', type=float, default=0.01,
+                        help='seconds between returned samples (default: %(default)s)')
+    parser.add_argument('--paper', action='store_true',
+                        help="the paper's exact pipeline (no shortcuts, Eq. 3 boxes)")
+    parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
+    parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
+    args = parser.parse_args(argv)
+    if args.all_pairs == (args.start is not None):
+        raise UsageError('give FROM and TO, or --all-pairs')
+    if not args.all_pairs and args.goal is None:
+        raise UsageError('give both FROM and TO')
+    try:
+        settings = (PlannerSettings.paper if args.paper else PlannerSettings)(
+            sample_period=args.sample_period)
+    except ValueError as exc:
+        raise UsageError(f'--sample-period: {exc}') from None
+    requests = None if args.all_pairs else [(parse_end(args.start), parse_end(args.goal))]
+    cell = load_cell(args)
+    cached = roadmap_for(args, cell, quiet=args.json == '-')
+    planner = Planner(cell, cached.roadmap, settings)
+    info = roadmap_json(cached)
+    results, rows = [], []
+    for start, goal in requests or station_pairs(cell):
+        result, row = plan_one(planner, start, goal, info, cell.robot.joint_names)
+        results.append(result)
+        rows.append(row)
+    if args.json:
+        write_json(rows if args.all_pairs else rows[0], args.json)
+    if args.json != '-':
+        print(table(rows) if args.all_pairs else _summary(rows[0]))
+    if args.plot:
+        _plot(cell, results, rows, Path(args.plot))
+    return EXIT_OK if all(r['status'] == 'ok' for r in rows) else EXIT_FAILURE
+
+
+def _summary(row: dict) -> str:
+    if row['status'] != 'ok':
+        return f"{row['from']} -> {row['to']}: {row['code']}: {row['message']}"
+    m = row['metrics']
+    ratios = ', '.join(f'{k} {v:.3f}' for k, v in m['limit_ratios'].items())
+    return (f"{row['from']} -> {row['to']}: ok, cycle time {row['cycle_time']:.3f} s "
+            f"(λ-scaled {row['initial_cycle_time']:.3f} s), elbow branches {m['branches']}\n"
+            f"  path {m['path_vertices']} vertices ({m['roadmap_path_vertices']} in the "
+            f"roadmap), joint length {m['joint_path_length']:.2f} rad, wafer travel "
+            f"{m['wafer_path_length']:.3f} m, min clearance {m['min_clearance'] * 1000:.1f} mm\n"
+            f'  limit ratios: {ratios}\n'
+            f"  planning {row['timings_ms']['total']:.1f} ms: "
+            + ', '.join(f'{k} {v:.1f}' for k, v in row['timings_ms'].items() if k != 'total'))
+
+
+def _plot(cell, results, rows, path: Path) -> None:
+    from wafer_planner_ros.plotting import plot_trajectory
+    done = [(r, row) for r, row in zip(results, rows) if r is not None]
+    for result, row in done:
+        target = path if len(rows) == 1 else path.with_name(
+            f"{path.stem}_{row['from']}_{row['to']}{path.suffix}")
+        plot_trajectory(cell, result, target)
+        print(f'plot: {target}', file=sys.stderr)
+
+
+def entry_point() -> int:
+    """Console-script entry point."""
+    return run(main)
+
+
+if __name__ == '__main__':
+    sys.exit(entry_point())

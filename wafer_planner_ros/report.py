@@ -1,0 +1,59 @@
+"""Plain-data (JSON) form of plan results and errors, shared by the tools (SPEC section 4)."""
+
+import numpy as np
+
+
+def plan_json(result, roadmap_info: dict, joint_names) -> dict:
+    """Return a successful plan as the SPEC's JSON object."""
+    spline = result.spline
+    points = [{'t': float(t), 'q': q.tolist(), 'qd': qd.tolist(), 'qdd': qdd.tolist()}
+              for t, q, qd, qdd in zip(result.times, result.positions, result.velocities,
+                                       result.accelerations)]
+    return {
+        'status': 'ok', 'code': 'OK',
+        'message': '; '.join(result.warnings) or 'ok',
+        'from': result.start.label, 'to': result.goal.label,
+        'joint_names': list(joint_names),
+        'cycle_time': result.cycle_time,
+        'initial_cycle_time': result.initial_cycle_time,
+        'spline': {'degree': 3, 'knots': spline.knots.tolist(),
+                   'control_points': spline.control_points.tolist()},
+        'points': points,
+        'path': result.path.tolist(),
+        'roadmap_path': result.roadmap_path.tolist(),
+        'metrics': _plain(result.metrics),
+        'timings_ms': _plain(result.timings_ms),
+        'roadmap': roadmap_info,
+    }
+
+
+def error_json(code: str, message: str, start, goal, roadmap_info: dict) -> dict:
+    """Return a failed request as the SPEC's JSON object."""
+    return {'status': 'error', 'code': code, 'message': message, 'from': _label(start),
+            'to': _label(goal), 'roadmap': roadmap_info}
+
+
+def roadmap_json(cached) -> dict:
+    """Return the roadmap block of the JSON object."""
+    roadmap = cached.roadmap
+    return {'nodes': roadmap.node_count, 'edges': roadmap.edge_count, 'hash': roadmap.digest,
+            'seed': roadmap.seed, 'cache_hit': cached.hit}
+
+
+def _label(value) -> str:
+    if isinstance(value, str):
+        return value
+    return ','.join(f'{v:g}' for v in np.asarray(value, float).reshape(-1))
+
+
+def _plain(value):
+    """Return value with numpy scalars and arrays turned into JSON types."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
