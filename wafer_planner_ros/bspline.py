@@ -42,7 +42,19 @@ def basis(knots, span: np.ndarray, t, degree: int) -> list:
     ``span[s]`` is the knot index i with knots[i] <= t[s] < knots[i+1]; the functions are
     N_{i-degree}, ..., N_i, each an array (or Dual) over the samples.
     """
+    return basis_levels(knots, span, t, degree)[degree]
+
+
+def basis_levels(knots, span: np.ndarray, t, degree: int) -> list:
+    """
+    Return the non-zero basis functions of every degree 0..degree at t, from one recursion.
+
+    Entry d holds N_{i-d,d}, ..., N_{i,d} on ``knots``; these are also the degree-d basis
+    functions of the (degree - d)-th derivative spline, whose knots drop (degree - d) knots
+    at each end, at its span i - (degree - d).
+    """
     funcs = [np.ones_like(span, dtype=float)]
+    levels = [list(funcs)]
     left, right = [None], [None]
     for j in range(1, degree + 1):
         left.append(t - knots[span + 1 - j])
@@ -53,7 +65,8 @@ def basis(knots, span: np.ndarray, t, degree: int) -> list:
             funcs[r] = saved + right[r + 1] * temp
             saved = left[j - r] * temp
         funcs.append(saved)
-    return funcs
+        levels.append(list(funcs))
+    return levels
 
 
 def combine(funcs: list, points, span: np.ndarray, degree: int):
@@ -127,4 +140,9 @@ class CubicBSpline:
         span = find_span(knots, t, len(points), degree)
         if degree == 0:
             return points[span].copy()
-        return combine(basis(knots, span, t, degree), points, span, degree)
+        values = combine(basis(knots, span, t, degree), points, span, degree)
+        if order == 0:
+            # A clamped curve passes through its end points; make that exact, not rounded.
+            values[t <= 0.0] = points[0]
+            values[t >= self.duration] = points[-1]
+        return values

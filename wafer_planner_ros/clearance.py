@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wafer_planner_ros.geometry import point_segment_distance, segments_intersect
+from wafer_planner_ros.geometry import point_segment_distance
 from wafer_planner_ros.kinematics import PlanarArm
 
 _CHUNK = 16384  # configurations per vectorised batch: bounds temporary memory to ~10 MB
@@ -79,27 +79,43 @@ class ClearanceModel:
     def edge_distances(self, q: np.ndarray) -> np.ndarray:
         """Return the distance of each body's spine to each edge (m), shape (N, 4, E)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        out = np.empty((len(q), len(self.radii), len(self.edge_start)))
-        for lo in range(0, len(q), _CHUNK):
-            out[lo:lo + _CHUNK] = self._edge_distances(q[lo:lo + _CHUNK])
-        return out
+        geometry = self._spines(q)
+        return np.stack([self._to_edge(geometry, e) for e in range(len(self.edge_start))],
+                        axis=-1)
 
-    def _edge_distances(self, q: np.ndarray) -> np.ndarray:
-        points = self.arm.joint_points(q)                      # (N, 4, 2)
-        a, b = points[:, :3, None, :], points[:, 1:, None, :]  # link spines (N, 3, 1, 2)
-        # Moving points (elbow, wrist, wafer centre) to every edge.
-        to_edge = point_segment_distance(b, self.edge_start, self._edge_vec, self._edge_len_sq)
-        from_start = np.concatenate(
-            [np.broadcast_to(self._base_dist, (len(q), 1, len(self._base_dist))),
-             to_edge[:, :2]], axis=1)
-        ab = b - a
-        to_vertex = point_segment_distance(
-            self.vertices, a, ab, np.sum(ab * ab, axis=-1))  # (N, 3, V)
-        links = np.minimum(np.minimum(from_start, to_edge),
-                           np.minimum(to_vertex[..., self._start_vertex],
-                                      to_vertex[..., self._end_vertex]))
-        links[segments_intersect(a, b, self.edge_start, self.edge_end)] = 0.0
-        return np.concatenate([links, to_edge[:, 2:]], axis=1)
+    def _spines(self, q: np.ndarray) -> tuple:
+        """Return the link spines' coordinates, as separate x/y arrays (fast in numpy)."""
+        points = self.arm.joint_points(q)
+        x, y = points[..., 0], points[..., 1]             # base, elbow, wrist, centre
+        ax, ay, bx, by = x[:, :3], y[:, :3], x[:, 1:], y[:, 1:]
+        abx, aby = bx - ax, by - ay
+        return ax, ay, bx, by, abx, aby, np.maximum(abx * abx + aby * aby, 1e-300)
+
+    def _to_edge(self, geometry: tuple, e: int) -> np.ndarray:
+        """Return the distance (N, 4) of every body's spine to edge e."""
+        ax, ay, bx, by, abx, aby, ab2 = geometry
+        (cx, cy), (dx, dy) = self.edge_start[e], self.edge_end[e]
+        ex, ey = dx - cx, dy - cy
+        # Elbow, wrist and wafer centre (the links' far ends) to the edge.
+        s = np.clip(((bx - cx) * ex + (by - cy) * ey) / self._edge_len_sq[e], 0.0, 1.0)
+        px, py = bx - cx - s * ex, by - cy - s * ey
+        ends = np.sqrt(px * px + py * py)
+        starts = np.empty_like(ends)
+        starts[:, 0] = self._base_dist[e]
+        starts[:, 1:] = ends[:, :2]
+        links = np.minimum(ends, starts)
+        # The edge's two vertices to each link.
+        for vx, vy in ((cx, cy), (dx, dy)):
+            t = np.clip(((vx - ax) * abx + (vy - ay) * aby) / ab2, 0.0, 1.0)
+            wx, wy = vx - ax - t * abx, vy - ay - t * aby
+            links = np.minimum(links, np.sqrt(wx * wx + wy * wy))
+        # A link crossing the edge is at distance zero.
+        side_c = abx * (cy - ay) - aby * (cx - ax)
+        side_d = abx * (dy - ay) - aby * (dx - ax)
+        side_a = ex * (ay - cy) - ey * (ax - cx)
+        side_b = ex * (by - cy) - ey * (bx - cx)
+        links[(side_c * side_d <= 0.0) & (side_a * side_b <= 0.0)] = 0.0
+        return np.concatenate([links, ends[:, 2:]], axis=1)
 
     def body_clearance(self, q: np.ndarray) -> np.ndarray:
         """
@@ -109,7 +125,15 @@ class ClearanceModel:
         configuration only the non-positive values mean something: a body beyond a link that
         crosses the boundary can be wholly outside it and still show a positive value.
         """
-        return self.edge_distances(q).min(axis=-1) - self.radii
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        out = np.empty((len(q), len(self.radii)))
+        for lo in range(0, len(q), _CHUNK):
+            geometry = self._spines(q[lo:lo + _CHUNK])
+            nearest = self._to_edge(geometry, 0)
+            for e in range(1, len(self.edge_start)):
+                np.minimum(nearest, self._to_edge(geometry, e), out=nearest)
+            out[lo:lo + _CHUNK] = nearest
+        return out - self.radii
 
     def clearance(self, q: np.ndarray) -> np.ndarray:
         """Return the smallest body clearance of each configuration in m, shape (N,)."""

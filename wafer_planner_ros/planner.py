@@ -209,7 +209,6 @@ class Planner:
         period = self.settings.sample_period
         times = np.append(np.arange(0.0, spline.duration, period), spline.duration)
         positions = spline.evaluate(times)
-        positions[-1] = qb  # exact, as verified
         warnings = () if timing.optimised else (
             f'time optimisation failed ({timing.message}); returning the λ-scaled timing',)
         wafer = cell.robot.arm.wafer_center(spline.evaluate(np.linspace(0, spline.duration,

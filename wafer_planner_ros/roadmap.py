@@ -26,7 +26,9 @@ class RoadmapSettings:
     neighbors: int = 30
     """Nearest earlier nodes each new node tries to connect to (30: ~40,000 edges, paper)."""
     station_neighbors: int = 80
-    """Nearest nodes a station (or a query configuration) tries to connect to."""
+    """Nearest nodes a station tries to connect to (and a query configuration, at most)."""
+    query_neighbors: int = 20
+    """Nearest nodes a query configuration tries first."""
     gaussian_sigma: float = 0.15
     """Spread of the Gaussian sampler's second sample (rad)."""
     bridge_sigma: float = 0.5
@@ -38,7 +40,8 @@ class RoadmapSettings:
 
     def __post_init__(self):
         """Reject settings that cannot build a roadmap."""
-        for name in ('nodes', 'neighbors', 'station_neighbors', 'draws_per_round'):
+        for name in ('nodes', 'neighbors', 'station_neighbors', 'query_neighbors',
+                     'draws_per_round'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f'roadmap setting {name} must be a positive integer, '

@@ -64,12 +64,13 @@ def _unwind(parent: np.ndarray, goal: int) -> list:
 
 
 def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np.ndarray,
-              clock=None):
+              clock=None, neighbors=None):
     """
     Return the shortest roadmap path between two free configurations, or None.
 
     A configuration that is a roadmap node (a station) is used as that node; any other is
-    connected at query time with certified edges to its nearest nodes, and a certified
+    connected at query time with certified edges to its ``neighbors`` nearest nodes (first
+    ``query_neighbors``, then ``station_neighbors`` if that finds no path), and a certified
     straight line from start to goal is also a candidate. Returns ``(configurations (P, 3),
     node indices (-1 for query configurations), length)``. ``clock.lap(stage)`` is called
     after the 'connect' and 'search' stages when a clock is given.
@@ -83,7 +84,8 @@ def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np
             index.append(int(nearest))
             continue
         index.append(virtual)
-        nodes, lengths = roadmap.connect(model, lipschitz, q)
+        nodes, lengths = roadmap.connect(model, lipschitz, q,
+                                         neighbors or roadmap.settings.query_neighbors)
         for j, w in zip(nodes.tolist(), lengths.tolist()):
             extra[virtual].append((j, w))
             extra[j].append((virtual, w))
@@ -100,6 +102,9 @@ def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np
     found = astar(roadmap.graph, coords, index[0], index[1], extra)
     if clock is not None:
         clock.lap('search')
+    wider = roadmap.settings.station_neighbors
+    if found is None and max(index) >= n and (neighbors or 0) < wider:
+        return find_path(roadmap, model, lipschitz, start, goal, clock, wider)
     if found is None:
         return None
     path, length = found
