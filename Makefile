@@ -27,6 +27,7 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml
 
 run: $(STAMP)
 	$(ENV) $(PY) -m wafer_planner_ros.cli.roadmap $(RUN_ARGS)
+	$(ENV) $(PY) -m wafer_planner_ros.cli.plan --all-pairs $(RUN_ARGS)
 
 test: $(STAMP)
 	$(COLCON) build $(COLCON_PATHS)

@@ -5,23 +5,28 @@ Variables: the durations h of the spline's spans. Objective: the total time sum(
 (Eq. 11). Constraints, all as ``1 - (x / (MARGIN * limit))**2 >= 0``:
 
 - joint velocity and acceleration control points (Eq. 6-8), and jerk control points when
-  the cell sets a jerk limit; by the convex-hull property these bound the curve everywhere;
+  the cell sets a jerk limit; by the convex-hull property these bound the curve everywhere.
+  Those below 30 % of their limit are left out of the solver (an active set) and added
+  back when a solution brings them closer;
 - the wafer-centre acceleration on x and y (Eq. 9), and on |a| when the cell sets
-  ``wafer_acceleration_norm_limit``, at constraint samples. The paper samples at the knots
-  only, which lets the limit be exceeded between them; **beyond the paper** each solution
-  is checked densely (every ``DENSE_STEP`` seconds) and the worst point of every span that
-  exceeds the limit becomes a new sample, then the problem is solved again;
+  ``wafer_acceleration_norm_limit``, at constraint samples: the paper's, at every knot;
 - ``h >= MIN_INTERVAL``: Eq. 10 as printed would force every span to last the whole
   straight-line time, so it is read as a small positive lower bound.
 
 The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ computed from a
-dense sample of the wafer acceleration, so that it is feasible; SLSQP then solves with
-exact gradients (forward-mode ``autodiff`` through the B-spline and the kinematics). If the
-solver fails, or its answer still exceeds a limit after ``MAX_ROUNDS`` rounds of added
-samples, the λ-scaled timing is returned with the reason.
+dense sample of the wafer acceleration so that it is feasible everywhere; SLSQP then solves
+with exact gradients (forward-mode ``autodiff`` through the B-spline and the kinematics).
 
-Limits are tightened by ``MARGIN`` inside the optimiser so that what lies between samples,
-and the solver's own tolerance, stay below the true limits that verification applies.
+**Beyond the paper**: sampling the wafer acceleration at the knots lets it exceed the limit
+between them. Every answer of the solver is therefore checked densely (every ``DENSE_STEP``
+seconds, and every control point) and scaled by its own λ of Eq. 12, which makes it
+feasible everywhere; if that scaling slows it by more than ``RESCALE_TOLERANCE``, the local
+peaks over the limit become new samples and the problem is solved again (at most
+``MAX_ROUNDS`` times). The fastest feasible answer is kept; only when the solver produced
+nothing usable is the λ-scaled start returned, with the reason.
+
+Limits are tightened by ``MARGIN`` inside the optimiser so that what lies between dense
+samples stays below the true limits that verification applies.
 """
 
 from dataclasses import dataclass
