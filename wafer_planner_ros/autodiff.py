@@ -130,8 +130,3 @@ def concatenate(parts: list) -> Dual:
     """Return the flattened Duals (all over the same variables) joined into one vector."""
     return Dual(np.concatenate([p.v.reshape(-1) for p in parts]),
                 np.concatenate([p.d.reshape(-1, p.d.shape[-1]) for p in parts]))
-
-
-def value(x):
-    """Return the plain values of an array or Dual."""
-    return x.v if isinstance(x, Dual) else x

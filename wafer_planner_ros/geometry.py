@@ -63,11 +63,3 @@ def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     with np.errstate(divide='ignore', invalid='ignore'):
         x_at = start[:, 0] + (py - y0) * (end[:, 0] - start[:, 0]) / (y1 - y0)
     return (np.count_nonzero(crosses & (px < x_at), axis=-1) % 2) == 1
-
-
-def polygon_distance(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Return the distance from points (..., 2) to the polygon's outline."""
-    start, end = polygon_edges(polygon)
-    ab = end - start
-    d = point_segment_distance(points[..., None, :], start, ab, np.sum(ab * ab, axis=-1))
-    return d.min(axis=-1)

@@ -245,7 +245,9 @@ class Planner:
                                 f'the trajectory {result.start.label} -> {result.goal.label} '
                                 'failed verification: ' + '; '.join(checked.problems))
         metrics = dict(result.metrics, min_clearance=checked.min_clearance,
-                       limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk))
+                       limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk),
+                       limit_checks=checked.limit_samples,
+                       collision_checks=checked.collision_samples)
         return replace(result, verification=checked, metrics=metrics)
 
 
