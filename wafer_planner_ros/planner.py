@@ -185,7 +185,7 @@ class Planner:
         raise failure
 
     def _timed_pair(self, a, b, qa, qb, branches, stage_ms) -> PlanResult:
-        """Return the (not yet verified) trajectory between two configurations."""
+        """Return the trajectory between two configurations, not yet verified nor sampled."""
         cell, model, lipschitz = self.cell, self.cell.clearance_model, self.cell.robot.lipschitz
         clock = _Clock(stage_ms)
         found = find_path(self.roadmap, model, lipschitz, qa, qb, clock=clock)
@@ -206,14 +206,8 @@ class Planner:
         timing = optimise(problem)
         spline = CubicBSpline.from_intervals(corridor.control_points, timing.intervals)
         clock.lap('optimise')
-        period = self.settings.sample_period
-        times = np.append(np.arange(0.0, spline.duration, period), spline.duration)
-        positions = spline.evaluate(times)
         warnings = () if timing.optimised else (
             f'time optimisation failed ({timing.message}); returning the λ-scaled timing',)
-        wafer = cell.robot.arm.wafer_center(spline.evaluate(np.linspace(0, spline.duration,
-                                                                        2001)))
-        joint = spline.evaluate(np.linspace(0, spline.duration, 2001))
         metrics = {
             'cycle_time': spline.duration,
             'initial_cycle_time': float(timing.initial_intervals.sum()),
@@ -222,21 +216,20 @@ class Planner:
             'solver_iterations': timing.iterations,
             'constraint_rounds': timing.rounds,
             'wafer_samples': timing.samples,
-            'joint_path_length': float(np.linalg.norm(np.diff(joint, axis=0), axis=1).sum()),
-            'wafer_path_length': float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()),
             'roadmap_path_vertices': len(roadmap_path),
             'path_vertices': len(path),
             'control_points': len(corridor.control_points),
             'branches': list(branches),
         }
+        empty = np.empty((0, 3))
         return PlanResult(
             start=a, goal=b, start_q=qa, goal_q=qb, branches=branches, spline=spline,
-            times=times, positions=positions, velocities=spline.evaluate(times, 1),
-            accelerations=spline.evaluate(times, 2), roadmap_path=roadmap_path, path=path,
-            timing=timing, verification=None, metrics=metrics, warnings=warnings)
+            times=np.empty(0), positions=empty, velocities=empty, accelerations=empty,
+            roadmap_path=roadmap_path, path=path, timing=timing, verification=None,
+            metrics=metrics, warnings=warnings)
 
     def _verified(self, result: PlanResult, stage_ms) -> PlanResult:
-        """Return the result with its verification; raise VERIFICATION_FAILED if it fails."""
+        """Return the result verified, sampled and measured; raise VERIFICATION_FAILED."""
         clock = _Clock(stage_ms)
         checked = verify(result.spline, self.cell, result.start_q, result.goal_q)
         clock.lap('verify')
@@ -244,11 +237,22 @@ class Planner:
             raise PlanningError(ErrorCode.VERIFICATION_FAILED,
                                 f'the trajectory {result.start.label} -> {result.goal.label} '
                                 'failed verification: ' + '; '.join(checked.problems))
-        metrics = dict(result.metrics, min_clearance=checked.min_clearance,
-                       limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk),
-                       limit_checks=checked.limit_samples,
-                       collision_checks=checked.collision_samples)
-        return replace(result, verification=checked, metrics=metrics)
+        spline = result.spline
+        dense = spline.evaluate(np.linspace(0.0, spline.duration, 2001))
+        wafer = self.cell.robot.arm.wafer_center(dense)
+        metrics = dict(
+            result.metrics, min_clearance=checked.min_clearance,
+            limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk),
+            limit_checks=checked.limit_samples, collision_checks=checked.collision_samples,
+            joint_path_length=float(np.linalg.norm(np.diff(dense, axis=0), axis=1).sum()),
+            wafer_path_length=float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()))
+        # Samples every sample_period, then the exact final point.
+        period = self.settings.sample_period
+        times = np.arange(0.0, spline.duration - 1e-9, period)
+        times = np.append(times, spline.duration)
+        return replace(result, verification=checked, metrics=metrics, times=times,
+                       positions=spline.evaluate(times), velocities=spline.evaluate(times, 1),
+                       accelerations=spline.evaluate(times, 2))
 
 
 class _Clock:
