@@ -8,7 +8,7 @@ from wafer_planner_ros.autodiff import Dual
 from wafer_planner_ros.bspline import CubicBSpline
 from wafer_planner_ros.corridor import build_corridor
 from wafer_planner_ros.search import find_path
-from wafer_planner_ros.timing import KinematicLimits, MARGIN, optimise, TimingProblem
+from wafer_planner_ros.timing import MARGIN, optimise, TimingProblem
 
 
 @pytest.fixture()
@@ -82,8 +82,7 @@ def _on_segment(points, a, b):
 
 def test_constraint_gradients_are_exact(default_cell, default_roadmap):
     corridor = _station_corridor(default_cell, default_roadmap, 'loadport2', 'loadlock1')
-    problem = TimingProblem(corridor.control_points, default_cell.robot.arm,
-                            KinematicLimits.of(default_cell.robot))
+    problem = TimingProblem(corridor.control_points, default_cell.robot)
     rng = np.random.default_rng(73)
     h = rng.uniform(0.05, 0.3, problem.spans)
     span = rng.integers(0, problem.spans, 25)
@@ -99,8 +98,8 @@ def test_constraint_gradients_are_exact(default_cell, default_roadmap):
 
 def test_lambda_start_is_feasible_and_the_optimum_is_faster(default_cell, default_roadmap):
     corridor = _station_corridor(default_cell, default_roadmap, 'loadport3', 'loadlock1')
-    limits = KinematicLimits.of(default_cell.robot)
-    problem = TimingProblem(corridor.control_points, default_cell.robot.arm, limits)
+    limits = default_cell.robot.limits
+    problem = TimingProblem(corridor.control_points, default_cell.robot)
     timing = optimise(problem)
     assert timing.optimised and timing.scale >= 1.0
     for intervals in (timing.initial_intervals, timing.intervals):

@@ -19,7 +19,7 @@ from wafer_planner_ros.corridor import build_corridor, simplify
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.search import find_path
 from wafer_planner_ros.shortcut import shortcut
-from wafer_planner_ros.timing import KinematicLimits, optimise, Timing, TimingProblem
+from wafer_planner_ros.timing import optimise, Timing, TimingProblem
 from wafer_planner_ros.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
@@ -108,7 +108,6 @@ class Planner:
         self.cell = cell
         self.roadmap = roadmap
         self.settings = settings
-        self.limits = KinematicLimits.of(cell.robot)
 
     def endpoint(self, value, role: str) -> Endpoint:
         """Resolve a station name or three joint angles; raise PlanningError if unusable."""
@@ -201,7 +200,7 @@ class Planner:
                                   per_body=self.settings.per_body_boxes,
                                   extra=self.settings.extra_points)
         clock.lap('corridor')
-        problem = TimingProblem(corridor.control_points, cell.robot.arm, self.limits)
+        problem = TimingProblem(corridor.control_points, cell.robot)
         clock.lap('spline')
         timing = optimise(problem)
         spline = CubicBSpline.from_intervals(corridor.control_points, timing.intervals)

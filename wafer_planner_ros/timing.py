@@ -31,7 +31,6 @@ samples stays below the true limits that verification applies.
 
 from dataclasses import dataclass
 import logging
-from typing import Optional
 
 import numpy as np
 from scipy.optimize import minimize
@@ -50,25 +49,6 @@ SAMPLES_PER_SPAN = 1
 RESCALE_TOLERANCE = 1e-3  # stop adding samples once Eq. 12 would slow the answer < 0.1 %
 FTOL = 1e-5  # s: SLSQP's stopping precision on the total time
 ACTIVE = 1.0 - 0.3 ** 2  # control-point constraints at 30 % of their limit or more are kept
-
-
-@dataclass(frozen=True, eq=False)
-class KinematicLimits:
-    """The limits a trajectory must meet."""
-
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    wafer: np.ndarray
-    """Wafer-centre acceleration limit on x and y (m/s^2)."""
-    jerk: Optional[np.ndarray] = None
-    wafer_norm: Optional[float] = None
-
-    @classmethod
-    def of(cls, robot) -> 'KinematicLimits':
-        """Return the limits of a cell's robot."""
-        return cls(velocity=robot.limits.velocity, acceleration=robot.limits.acceleration,
-                   wafer=robot.wafer_acceleration_limit, jerk=robot.limits.jerk,
-                   wafer_norm=robot.wafer_acceleration_norm_limit)
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,12 +74,14 @@ class Timing:
 class TimingProblem:
     """The knot-interval optimisation of one set of control points."""
 
-    def __init__(self, control_points: np.ndarray, arm, limits: KinematicLimits):
-        """Set up the problem for control points (n + 1, 3)."""
+    def __init__(self, control_points: np.ndarray, robot):
+        """Set up the problem for control points (n + 1, 3) of a cell's robot."""
         self.points = np.asarray(control_points, float)
         self.spans = len(self.points) - DEGREE
-        self.arm = arm
-        self.limits = limits
+        self.arm = robot.arm
+        self.limits = robot.limits
+        self.wafer = robot.wafer_acceleration_limit
+        self.wafer_norm = robot.wafer_acceleration_norm_limit
 
     def states(self, intervals, span: np.ndarray, fraction: np.ndarray):
         """Return q, q', q'' at a fraction of the given spans (arrays, or Duals of h)."""
@@ -142,10 +124,10 @@ class TimingProblem:
         control = self.control_constraints(intervals)
         parts = [control if rows is None else control[rows]]
         ax, ay = self.arm.wafer_acceleration_xy(*self.states(intervals, span, fraction))
-        parts.append(1.0 - _square(ax / (MARGIN * self.limits.wafer[0])))
-        parts.append(1.0 - _square(ay / (MARGIN * self.limits.wafer[1])))
-        if self.limits.wafer_norm is not None:
-            parts.append(1.0 - (ax * ax + ay * ay) / (MARGIN * self.limits.wafer_norm) ** 2)
+        parts.append(1.0 - _square(ax / (MARGIN * self.wafer[0])))
+        parts.append(1.0 - _square(ay / (MARGIN * self.wafer[1])))
+        if self.wafer_norm is not None:
+            parts.append(1.0 - (ax * ax + ay * ay) / (MARGIN * self.wafer_norm) ** 2)
         if isinstance(intervals, ad.Dual):
             return ad.concatenate(parts)
         return np.concatenate([np.ravel(p) for p in parts])
@@ -154,9 +136,9 @@ class TimingProblem:
         """Return (ratio, span, fraction): the worst of x, y, |a| every DENSE_STEP seconds."""
         span, fraction = dense_grid(intervals)
         ax, ay = self.arm.wafer_acceleration_xy(*self.states(intervals, span, fraction))
-        ratio = np.maximum(np.abs(ax) / self.limits.wafer[0], np.abs(ay) / self.limits.wafer[1])
-        if self.limits.wafer_norm is not None:
-            ratio = np.maximum(ratio, np.hypot(ax, ay) / self.limits.wafer_norm)
+        ratio = np.maximum(np.abs(ax) / self.wafer[0], np.abs(ay) / self.wafer[1])
+        if self.wafer_norm is not None:
+            ratio = np.maximum(ratio, np.hypot(ax, ay) / self.wafer_norm)
         return ratio, span, fraction
 
     def scale_factor(self, intervals: np.ndarray) -> float:
