@@ -83,33 +83,40 @@ class TimingProblem:
         self.wafer = robot.wafer_acceleration_limit
         self.wafer_norm = robot.wafer_acceleration_norm_limit
 
-    def states(self, intervals, span: np.ndarray, fraction: np.ndarray):
-        """Return q, q', q'' at a fraction of the given spans (arrays, or Duals of h)."""
-        knots = knots_from_intervals(intervals)
+    def states(self, intervals, span: np.ndarray, fraction: np.ndarray, derivatives=None):
+        """
+        Return q, q', q'' at a fraction of the given spans (arrays, or Duals of h).
+
+        ``derivatives``: ``self.derivatives(intervals)`` if the caller already has it.
+        """
+        knots, (velocity, acceleration) = derivatives or self.derivatives(intervals, jerk=False)
         index = span + DEGREE  # knot index where the span starts
         t = knots[index] + (knots[index + 1] - knots[index]) * fraction
-        velocity = derivative_points(self.points, knots, DEGREE)
-        acceleration = derivative_points(velocity, knots[1:-1], DEGREE - 1)
         bases = basis_levels(knots, index, t, DEGREE)  # serve q, q' and q'' alike
         q = combine(bases[3], self.points, index, DEGREE)
         qd = combine(bases[2], velocity, index - 1, 2)
         qdd = combine(bases[1], acceleration, index - 2, 1)
         return q, qd, qdd
 
-    def control_derivatives(self, intervals) -> list:
-        """Return the velocity, acceleration (and jerk) control points."""
+    def derivatives(self, intervals, jerk=None) -> tuple:
+        """
+        Return (knots, [velocity, acceleration (, jerk)] control points) of a timing.
+
+        Jerk control points come when ``jerk`` is True, or by default when the cell limits
+        jerk.
+        """
         knots = knots_from_intervals(intervals)
         out = [derivative_points(self.points, knots, DEGREE)]
         out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
-        if self.limits.jerk is not None:
+        if jerk or (jerk is None and self.limits.jerk is not None):
             out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
-        return out
+        return knots, out
 
-    def control_constraints(self, intervals):
+    def control_constraints(self, intervals, derivatives=None):
         """Return the control-point constraints g >= 0, flattened (array or Dual of h)."""
         bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
-        parts = [1.0 - _square(points / (MARGIN * limit))
-                 for points, limit in zip(self.control_derivatives(intervals), bounds)]
+        points = (derivatives or self.derivatives(intervals))[1]
+        parts = [1.0 - _square(p / (MARGIN * limit)) for p, limit in zip(points, bounds)]
         if isinstance(intervals, ad.Dual):
             return ad.concatenate(parts)
         return np.concatenate([np.ravel(p) for p in parts])
@@ -121,9 +128,12 @@ class TimingProblem:
         ``rows`` selects control-point constraints (a mask over ``control_constraints``);
         the wafer-acceleration constraints at the samples follow.
         """
-        control = self.control_constraints(intervals)
+        derivatives = self.derivatives(intervals)
+        control = self.control_constraints(intervals, derivatives)
         parts = [control if rows is None else control[rows]]
-        ax, ay = self.arm.wafer_acceleration_xy(*self.states(intervals, span, fraction))
+        knots, points = derivatives
+        ax, ay = self.arm.wafer_acceleration_xy(
+            *self.states(intervals, span, fraction, (knots, points[:2])))
         parts.append(1.0 - _square(ax / (MARGIN * self.wafer[0])))
         parts.append(1.0 - _square(ay / (MARGIN * self.wafer[1])))
         if self.wafer_norm is not None:
@@ -145,8 +155,7 @@ class TimingProblem:
         """Return λ of Eq. 12 for a timing (wafer acceleration from the dense grid)."""
         bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
         ratios = [1.0]
-        for order, (points, limit) in enumerate(zip(self.control_derivatives(intervals),
-                                                    bounds)):
+        for order, (points, limit) in enumerate(zip(self.derivatives(intervals)[1], bounds)):
             peak = float(np.max(np.abs(points) / (MARGIN * limit), initial=0.0))
             ratios.append(peak ** (1.0 / (order + 1)))  # speed scales 1/λ, accel 1/λ², ...
         wafer = float(self.dense_wafer_ratio(intervals)[0].max()) / MARGIN
