@@ -169,6 +169,7 @@ class Planner:
                     candidates.append(self._timed_pair(a, b, qa, qb, (elbow_a, elbow_b),
                                                        stage_ms))
                 except PlanningError as exc:
+                    logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
                     failure = failure or exc
         # Shortest cycle first; only what is returned needs verifying.
         for result in sorted(candidates, key=lambda r: r.cycle_time):
@@ -176,6 +177,7 @@ class Planner:
             try:
                 result = self._verified(result, stage_ms)
             except PlanningError as exc:
+                logger.warning('%s; trying the next branch combination', exc)
                 failure = failure or exc
                 continue
             total = (time.perf_counter() - begun) * 1000.0
