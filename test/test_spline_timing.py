@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from wafer_planner_ros.autodiff import Dual
 from wafer_planner_ros.bspline import CubicBSpline
 from wafer_planner_ros.corridor import build_corridor
 from wafer_planner_ros.search import find_path
@@ -85,15 +84,29 @@ def test_constraint_gradients_are_exact(default_cell, default_roadmap):
     problem = TimingProblem(corridor.control_points, default_cell.robot)
     rng = np.random.default_rng(73)
     h = rng.uniform(0.05, 0.3, problem.spans)
-    span = rng.integers(0, problem.spans, 25)
-    fraction = rng.random(25)
-    analytic = problem.constraints(Dual.variables(h), span, fraction)
-    assert np.allclose(analytic.v, problem.constraints(h, span, fraction))
+    # Samples in every span, including the first and last three (clamped knots).
+    span = np.concatenate([np.arange(problem.spans), rng.integers(0, problem.spans, 25)])
+    samples = problem.samples(span, rng.random(len(span)))
+    values = problem.constraints(h, samples)
+    exact = problem.jacobian(h, samples)
+    assert exact.shape == (len(values), problem.spans)
     eps = 1e-7
-    numeric = np.stack([(problem.constraints(h + eps * e, span, fraction)
-                         - problem.constraints(h - eps * e, span, fraction)) / (2 * eps)
+    numeric = np.stack([(problem.constraints(h + eps * e, samples)
+                         - problem.constraints(h - eps * e, samples)) / (2 * eps)
                         for e in np.eye(problem.spans)], axis=1)
-    assert np.allclose(analytic.d, numeric, rtol=1e-5, atol=1e-4)
+    assert np.allclose(exact, numeric, rtol=1e-5, atol=1e-4)
+    # The per-sample windows give the same values as the whole spline.
+    spline = CubicBSpline.from_intervals(corridor.control_points, h)
+    t = spline.knots[span + 3] + h[span] * samples.fraction
+    expected = default_cell.robot.arm.wafer_acceleration(
+        spline.evaluate(t), spline.evaluate(t, 1), spline.evaluate(t, 2))
+    ax, ay = default_cell.robot.arm.wafer_acceleration_xy(
+        *problem.states(samples.local(h), samples))
+    assert np.allclose(np.column_stack([ax, ay]), expected, rtol=1e-9, atol=1e-9)
+    # Batched evaluation agrees with one-by-one evaluation.
+    batch = np.stack([h, 1.5 * h])
+    assert np.allclose(problem.constraints(batch, samples)[1],
+                       problem.constraints(1.5 * h, samples))
 
 
 def test_lambda_start_is_feasible_and_the_optimum_is_faster(default_cell, default_roadmap):

@@ -5,34 +5,26 @@ The knots are a time sequence: four at 0, the interior times, four at the total 
 that the curve starts at the first control point and ends at the last. Derivatives are
 B-splines of lower degree whose control points (Eq. 6-7) are
 ``CPV_i = 3 (CP_{i+1} - CP_i) / (t_{i+4} - t_{i+1})`` and so on; by the convex-hull
-property bounding them bounds the derivative everywhere (Eq. 8). The functions below are
-written with plain arithmetic so that they also run on ``autodiff.Dual`` knots, which is
-how the time optimisation gets its gradients.
+property bounding them bounds the derivative everywhere (Eq. 8). The functions below take
+knots and points with any leading (batch) axes and use plain arithmetic only, so they also
+run on complex values: that is how the time optimisation differentiates them (complex step).
 """
 
 from dataclasses import dataclass
+from functools import cached_property
+from math import factorial
 
 import numpy as np
-
-from wafer_planner_ros.autodiff import Dual
 
 DEGREE = 3
 
 
 def knots_from_intervals(intervals):
-    """Return the clamped cubic knot vector of span durations h (s): len(h) + 7 knots."""
-    if isinstance(intervals, Dual):
-        m = intervals.shape[0]
-        return Dual(knots_from_intervals(intervals.v), _knot_jacobian(m))
-    times = np.concatenate([[0.0], np.cumsum(intervals)])
-    return np.concatenate([[0.0] * DEGREE, times, [times[-1]] * DEGREE])
-
-
-def _knot_jacobian(m: int) -> np.ndarray:
-    """Return d(knots)/d(intervals), (m + 7, m)."""
-    cumulative = np.tril(np.ones((m, m)))
-    return np.vstack([np.zeros((DEGREE + 1, m)), cumulative, np.repeat(cumulative[-1:],
-                                                                       DEGREE, axis=0)])
+    """Return the clamped cubic knot vector of span durations h (s): (..., m + 7) knots."""
+    intervals = np.asarray(intervals)
+    times = np.cumsum(intervals, axis=-1)
+    zeros = np.zeros(intervals.shape[:-1] + (DEGREE + 1,), dtype=times.dtype)
+    return np.concatenate([zeros, times, np.repeat(times[..., -1:], DEGREE, axis=-1)], axis=-1)
 
 
 def basis(knots, span: np.ndarray, t, degree: int) -> list:
@@ -40,7 +32,8 @@ def basis(knots, span: np.ndarray, t, degree: int) -> list:
     Return the degree+1 non-zero basis functions at t (The NURBS Book, A2.2).
 
     ``span[s]`` is the knot index i with knots[i] <= t[s] < knots[i+1]; the functions are
-    N_{i-degree}, ..., N_i, each an array (or Dual) over the samples.
+    N_{i-degree}, ..., N_i, each an array over the samples (``knots`` (..., k) and ``t``
+    (..., s) may have leading batch axes).
     """
     return basis_levels(knots, span, t, degree)[degree]
 
@@ -57,8 +50,8 @@ def basis_levels(knots, span: np.ndarray, t, degree: int) -> list:
     levels = [list(funcs)]
     left, right = [None], [None]
     for j in range(1, degree + 1):
-        left.append(t - knots[span + 1 - j])
-        right.append(knots[span + j] - t)
+        left.append(t - knots[..., span + 1 - j])
+        right.append(knots[..., span + j] - t)
         saved = 0.0
         for r in range(j):
             temp = funcs[r] / (right[r + 1] + left[j - r])
@@ -70,24 +63,19 @@ def basis_levels(knots, span: np.ndarray, t, degree: int) -> list:
 
 
 def combine(funcs: list, points, span: np.ndarray, degree: int):
-    """Return sum_r funcs[r] * points[span - degree + r] (points: (n, d) array or Dual)."""
+    """Return sum_r funcs[r] * points[span - degree + r] (points (..., n, d))."""
     total = None
     for r, f in enumerate(funcs):
-        term = points[span - degree + r] * _column(f)
+        term = points[..., span - degree + r, :] * f[..., None]
         total = term if total is None else total + term
     return total
 
 
-def _column(x):
-    """Return x with a trailing axis of length 1."""
-    return x.expand() if isinstance(x, Dual) else np.asarray(x)[..., None]
-
-
 def derivative_points(points, knots, degree: int):
-    """Return the control points of the derivative spline (Eq. 6-7; degree - 1)."""
-    n = points.shape[0]
-    width = knots[1 + degree:n + degree] - knots[1:n]
-    return (points[1:] - points[:-1]) * degree / _column(width)
+    """Return the control points (..., n - 1, d) of the derivative spline (Eq. 6-7)."""
+    n = points.shape[-2]
+    width = knots[..., 1 + degree:n + degree] - knots[..., 1:n]
+    return (points[..., 1:, :] - points[..., :-1, :]) * degree / width[..., None]
 
 
 def find_span(knots: np.ndarray, t: np.ndarray, n_points: int, degree: int) -> np.ndarray:
@@ -134,15 +122,38 @@ class CubicBSpline:
         return points, knots, degree
 
     def evaluate(self, t, order: int = 0) -> np.ndarray:
-        """Return q (order 0), q', q'' or q''' at times t (clipped to [0, T]), (len(t), 3)."""
+        """
+        Return q (order 0), q', q'' or q''' at times t (clipped to [0, T]), (len(t), 3).
+
+        Each span is a cubic polynomial; its Taylor coefficients at the span's start come
+        from the B-spline basis once (``_pieces``), then every time costs one Horner sum.
+        """
         t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
+        starts, coefficients = self._pieces
+        span = np.clip(np.searchsorted(starts, t, side='right') - 1, 0, len(starts) - 1)
+        tau = (t - starts[span])[:, None]
+        pieces = coefficients[span]
+        values = pieces[:, DEGREE] * (factorial(DEGREE) / factorial(DEGREE - order))
+        for j in range(DEGREE - 1, order - 1, -1):
+            values = values * tau + pieces[:, j] * (factorial(j) / factorial(j - order))
+        if order == 0:
+            # A clamped curve passes through its end points; make that exact, not rounded.
+            values[t <= 0.0] = self.control_points[0]
+            values[t >= self.duration] = self.control_points[-1]
+        return values
+
+    @cached_property
+    def _pieces(self) -> tuple:
+        """Return (span start times (m,), Taylor coefficients (m, 4, 3) at those starts)."""
+        starts = self.knots[DEGREE:-DEGREE - 1]
+        coefficients = np.stack([self._from_basis(starts, k) / factorial(k)
+                                 for k in range(DEGREE + 1)], axis=1)
+        return starts, coefficients
+
+    def _from_basis(self, t: np.ndarray, order: int) -> np.ndarray:
+        """Return the order-th derivative at times t from the B-spline basis (Eq. 4-7)."""
         points, knots, degree = self.derivative(order)
         span = find_span(knots, t, len(points), degree)
         if degree == 0:
             return points[span].copy()
-        values = combine(basis(knots, span, t, degree), points, span, degree)
-        if order == 0:
-            # A clamped curve passes through its end points; make that exact, not rounded.
-            values[t <= 0.0] = points[0]
-            values[t >= self.duration] = points[-1]
-        return values
+        return combine(basis(knots, span, t, degree), points, span, degree)

@@ -10,8 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wafer_planner_ros import autodiff as ad
-
 
 @dataclass(frozen=True)
 class IkSolution:
@@ -75,13 +73,14 @@ class PlanarArm:
 
         p = base + sum_j l_j (cos th_j, sin th_j) with th_j = q_1 + ... + q_j, so
         p'' = sum_j l_j (a_j (-sin th_j, cos th_j) - w_j^2 (cos th_j, sin th_j)), w and a
-        being the cumulative joint velocities and accelerations. Arrays or autodiff Duals.
+        being the cumulative joint velocities and accelerations. Plain arithmetic, so it
+        also runs on complex values (the time optimisation's complex-step derivatives).
         """
-        theta, omega, alpha = (ad.cumsum(x, -1) for x in (q, qd, qdd))
-        c, s = ad.cos(theta), ad.sin(theta)
+        theta, omega, alpha = (np.cumsum(x, axis=-1) for x in (q, qd, qdd))
+        c, s = np.cos(theta), np.sin(theta)
         spin = omega * omega
-        ax = ad.total((-alpha * s - spin * c) * self.link_lengths, -1)
-        ay = ad.total((alpha * c - spin * s) * self.link_lengths, -1)
+        ax = np.sum((-alpha * s - spin * c) * self.link_lengths, axis=-1)
+        ay = np.sum((alpha * c - spin * s) * self.link_lengths, axis=-1)
         return ax, ay
 
     def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:

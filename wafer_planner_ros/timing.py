@@ -15,7 +15,11 @@ Variables: the durations h of the spline's spans. Objective: the total time sum(
 
 The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ computed from a
 dense sample of the wafer acceleration so that it is feasible everywhere; SLSQP then solves
-with exact gradients (forward-mode ``autodiff`` through the B-spline and the kinematics).
+with exact gradients. They come by the complex step: every constraint is an analytic
+function of h (the B-spline recursion and the kinematics use plain arithmetic), so
+``Im g(h + i ε e_k) / ε`` is dg/dh_k to machine precision — there is no difference to cancel,
+unlike finite differences — and one vectorised evaluation on the batch ``h + i ε I`` gives
+the whole Jacobian.
 
 **Beyond the paper**: sampling the wafer acceleration at the knots lets it exceed the limit
 between them. Every answer of the solver is therefore checked densely (every ``DENSE_STEP``
@@ -35,9 +39,8 @@ import logging
 import numpy as np
 from scipy.optimize import minimize
 
-from wafer_planner_ros import autodiff as ad
-from wafer_planner_ros.bspline import basis_levels, combine, DEGREE, derivative_points
-from wafer_planner_ros.bspline import knots_from_intervals
+from wafer_planner_ros.bspline import basis_levels, combine, CubicBSpline, DEGREE
+from wafer_planner_ros.bspline import derivative_points, knots_from_intervals
 
 logger = logging.getLogger(__name__)
 
@@ -49,6 +52,7 @@ SAMPLES_PER_SPAN = 1
 RESCALE_TOLERANCE = 1e-3  # stop adding samples once Eq. 12 would slow the answer < 0.1 %
 FTOL = 1e-5  # s: SLSQP's stopping precision on the total time
 ACTIVE = 1.0 - 0.3 ** 2  # control-point constraints at 30 % of their limit or more are kept
+COMPLEX_STEP = 1e-30  # s: far below rounding, so Im g / step is dg/dh exactly
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +75,36 @@ class Timing:
     message: str = ''
 
 
+@dataclass(frozen=True, eq=False)
+class Samples:
+    """
+    Instants where the wafer acceleration is constrained, with each one's piece of spline.
+
+    A point in span s depends on the control points P_s..P_{s+3} and on the knots
+    t_s..t_{s+7} only, i.e. on the durations h_{s-3}..h_{s+3} (``window``; those beyond the
+    ends are the clamped knots' zero lengths). Evaluating every sample on its own window
+    keeps the arrays small, and lets the Jacobian perturb each sample's own durations only.
+    """
+
+    span: np.ndarray
+    fraction: np.ndarray
+    window: np.ndarray
+    """(K, 7) indices of h_{s-3}..h_{s+3}, clipped into range."""
+    inside: np.ndarray
+    """(K, 7) whether each window entry is a real span."""
+    points: np.ndarray
+    """(K, 4, 3) the control points P_s..P_{s+3}."""
+
+    def __len__(self) -> int:
+        """Return the number of samples."""
+        return len(self.span)
+
+    def local(self, intervals) -> np.ndarray:
+        """Return each sample's window of durations, (..., K, 7), from intervals (..., m)."""
+        intervals = np.asarray(intervals)
+        return np.where(self.inside, intervals[..., self.window], 0.0)
+
+
 class TimingProblem:
     """The knot-interval optimisation of one set of control points."""
 
@@ -83,19 +117,30 @@ class TimingProblem:
         self.wafer = robot.wafer_acceleration_limit
         self.wafer_norm = robot.wafer_acceleration_norm_limit
 
-    def states(self, intervals, span: np.ndarray, fraction: np.ndarray, derivatives=None):
-        """
-        Return q, q', q'' at a fraction of the given spans (arrays, or Duals of h).
+    def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
+        """Return the samples at ``fraction`` (0..1) of the given spans."""
+        span = np.asarray(span, int)
+        window = span[:, None] + np.arange(-DEGREE, DEGREE + 1)
+        inside = (window >= 0) & (window < self.spans)
+        return Samples(span=span, fraction=np.asarray(fraction, float),
+                       window=np.clip(window, 0, self.spans - 1), inside=inside,
+                       points=self.points[span[:, None] + np.arange(DEGREE + 1)])
 
-        ``derivatives``: ``self.derivatives(intervals)`` if the caller already has it.
+    def states(self, local, samples: Samples) -> tuple:
         """
-        knots, (velocity, acceleration) = derivatives or self.derivatives(intervals, jerk=False)
-        index = span + DEGREE  # knot index where the span starts
-        t = knots[index] + (knots[index + 1] - knots[index]) * fraction
-        bases = basis_levels(knots, index, t, DEGREE)  # serve q, q' and q'' alike
-        q = combine(bases[3], self.points, index, DEGREE)
-        qd = combine(bases[2], velocity, index - 1, 2)
-        qdd = combine(bases[1], acceleration, index - 2, 1)
+        Return q, q', q'' at the samples, given their windows of durations (..., K, 7).
+
+        ``local`` may carry leading batch axes and be complex (see ``Samples.local``).
+        """
+        knots = np.concatenate([np.zeros(local.shape[:-1] + (1,)), np.cumsum(local, axis=-1)],
+                               axis=-1)  # t_s..t_{s+7}, relative to t_s
+        velocity = derivative_points(samples.points, knots, DEGREE)
+        acceleration = derivative_points(velocity, knots[..., 1:-1], DEGREE - 1)
+        t = knots[..., DEGREE] + local[..., DEGREE] * samples.fraction
+        bases = basis_levels(knots, DEGREE, t, DEGREE)  # serve q, q' and q'' alike
+        q = combine(bases[3], samples.points, DEGREE, DEGREE)
+        qd = combine(bases[2], velocity, DEGREE - 1, 2)
+        qdd = combine(bases[1], acceleration, DEGREE - 2, 1)
         return q, qd, qdd
 
     def derivatives(self, intervals, jerk=None) -> tuple:
@@ -103,68 +148,100 @@ class TimingProblem:
         Return (knots, [velocity, acceleration (, jerk)] control points) of a timing.
 
         Jerk control points come when ``jerk`` is True, or by default when the cell limits
-        jerk.
+        jerk. ``intervals`` (..., m) may carry leading batch axes and be complex.
         """
         knots = knots_from_intervals(intervals)
         out = [derivative_points(self.points, knots, DEGREE)]
-        out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
+        out.append(derivative_points(out[0], knots[..., 1:-1], DEGREE - 1))
         if jerk or (jerk is None and self.limits.jerk is not None):
-            out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
+            out.append(derivative_points(out[1], knots[..., 2:-2], DEGREE - 2))
         return knots, out
 
-    def control_constraints(self, intervals, derivatives=None):
-        """Return the control-point constraints g >= 0, flattened (array or Dual of h)."""
+    def control_constraints(self, intervals):
+        """Return the control-point constraints g >= 0, (..., rows) for intervals (..., m)."""
         bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
-        points = (derivatives or self.derivatives(intervals))[1]
-        parts = [1.0 - _square(p / (MARGIN * limit)) for p, limit in zip(points, bounds)]
-        if isinstance(intervals, ad.Dual):
-            return ad.concatenate(parts)
-        return np.concatenate([np.ravel(p) for p in parts])
+        return np.concatenate([_flat(1.0 - _square(p / (MARGIN * limit)))
+                               for p, limit in zip(self.derivatives(intervals)[1], bounds)],
+                              axis=-1)
 
-    def constraints(self, intervals, span, fraction, rows=None):
+    def wafer_constraints(self, local, samples: Samples):
+        """Return the wafer constraints g >= 0 at the samples: x, y (, |a|), (..., c * K)."""
+        ax, ay = self.arm.wafer_acceleration_xy(*self.states(local, samples))
+        parts = [1.0 - _square(ax / (MARGIN * self.wafer[0])),
+                 1.0 - _square(ay / (MARGIN * self.wafer[1]))]
+        if self.wafer_norm is not None:
+            parts.append(1.0 - (ax * ax + ay * ay) / (MARGIN * self.wafer_norm) ** 2)
+        return np.concatenate(parts, axis=-1)
+
+    def constraints(self, intervals, samples: Samples, rows=None) -> np.ndarray:
         """
-        Return the constraint values g >= 0 (array, or Dual of h) with the margin.
+        Return the constraint values g >= 0 with the margin, (..., rows).
 
         ``rows`` selects control-point constraints (a mask over ``control_constraints``);
         the wafer-acceleration constraints at the samples follow.
         """
-        derivatives = self.derivatives(intervals)
-        control = self.control_constraints(intervals, derivatives)
-        parts = [control if rows is None else control[rows]]
-        knots, points = derivatives
-        ax, ay = self.arm.wafer_acceleration_xy(
-            *self.states(intervals, span, fraction, (knots, points[:2])))
-        parts.append(1.0 - _square(ax / (MARGIN * self.wafer[0])))
-        parts.append(1.0 - _square(ay / (MARGIN * self.wafer[1])))
-        if self.wafer_norm is not None:
-            parts.append(1.0 - (ax * ax + ay * ay) / (MARGIN * self.wafer_norm) ** 2)
-        if isinstance(intervals, ad.Dual):
-            return ad.concatenate(parts)
-        return np.concatenate([np.ravel(p) for p in parts])
+        control = self.control_constraints(intervals)
+        return np.concatenate([control if rows is None else control[..., rows],
+                               self.wafer_constraints(samples.local(intervals), samples)],
+                              axis=-1)
+
+    def jacobian(self, intervals: np.ndarray, samples: Samples, rows=None) -> np.ndarray:
+        """
+        Return d(constraints)/d(intervals), (rows, m), exact (complex step).
+
+        Control points take the whole batch ``h + i ε I``; each wafer sample perturbs only
+        the five durations h_{s-2}..h_{s+2} its value depends on.
+        """
+        intervals = np.asarray(intervals, float)
+        step = 1j * COMPLEX_STEP
+        control = self.control_constraints(intervals + step * np.eye(len(intervals)))
+        control = (control if rows is None else control[..., rows]).imag.T
+        own = np.arange(1, 2 * DEGREE)  # window positions of h_{s-2}..h_{s+2}
+        local = samples.local(intervals) + step * np.eye(2 * DEGREE + 1)[own][:, None, :]
+        wafer = self.wafer_constraints(local, samples).imag.T  # (c * K, 5)
+        parts = wafer.shape[0] // len(samples)
+        columns = np.tile(samples.window[:, own], (parts, 1))
+        real = np.tile(samples.inside[:, own], (parts, 1))
+        dense = np.zeros((wafer.shape[0], len(intervals)))
+        row = np.broadcast_to(np.arange(wafer.shape[0])[:, None], columns.shape)
+        dense[row[real], columns[real]] = wafer[real]
+        return np.vstack([control, dense]) / COMPLEX_STEP
 
     def dense_wafer_ratio(self, intervals: np.ndarray) -> tuple:
         """Return (ratio, span, fraction): the worst of x, y, |a| every DENSE_STEP seconds."""
         span, fraction = dense_grid(intervals)
-        ax, ay = self.arm.wafer_acceleration_xy(*self.states(intervals, span, fraction))
+        spline = CubicBSpline.from_intervals(self.points, intervals)
+        t = spline.knots[span + DEGREE] + intervals[span] * fraction
+        ax, ay = self.arm.wafer_acceleration_xy(*(spline.evaluate(t, k) for k in range(3)))
         ratio = np.maximum(np.abs(ax) / self.wafer[0], np.abs(ay) / self.wafer[1])
         if self.wafer_norm is not None:
             ratio = np.maximum(ratio, np.hypot(ax, ay) / self.wafer_norm)
         return ratio, span, fraction
 
-    def scale_factor(self, intervals: np.ndarray) -> float:
-        """Return λ of Eq. 12 for a timing (wafer acceleration from the dense grid)."""
+    def scale_factor(self, intervals: np.ndarray, wafer_ratio=None) -> float:
+        """
+        Return λ of Eq. 12 for a timing (wafer acceleration from the dense grid).
+
+        ``wafer_ratio``: the largest ``dense_wafer_ratio`` if the caller already has it.
+        """
         bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
         ratios = [1.0]
         for order, (points, limit) in enumerate(zip(self.derivatives(intervals)[1], bounds)):
             peak = float(np.max(np.abs(points) / (MARGIN * limit), initial=0.0))
             ratios.append(peak ** (1.0 / (order + 1)))  # speed scales 1/λ, accel 1/λ², ...
-        wafer = float(self.dense_wafer_ratio(intervals)[0].max()) / MARGIN
-        ratios.append(np.sqrt(wafer))
+        if wafer_ratio is None:
+            wafer_ratio = self.dense_wafer_ratio(intervals)[0].max()
+        ratios.append(np.sqrt(float(wafer_ratio) / MARGIN))
         return max(ratios)
 
 
 def _square(x):
     return x * x
+
+
+def _flat(points):
+    """Return control-point values (..., n, d) as (..., n * d)."""
+    return points.reshape(points.shape[:-2] + (-1,))
 
 
 def dense_grid(intervals: np.ndarray, step: float = DENSE_STEP) -> tuple:
@@ -201,7 +278,7 @@ def optimise(problem: TimingProblem) -> Timing:
     rows = problem.control_constraints(start) <= ACTIVE
     best, intervals, iterations = start, start, 0
     for rounds in range(1, MAX_ROUNDS + 1):
-        result = _solve(problem, intervals, span, fraction, rows)
+        result = _solve(problem, intervals, problem.samples(span, fraction), rows)
         logger.debug('round %d: %s (%d iterations, T = %.4f s)', rounds, result.message,
                      result.nit, result.x.sum())
         iterations += result.nit
@@ -209,14 +286,14 @@ def optimise(problem: TimingProblem) -> Timing:
             break
         intervals = np.maximum(result.x, MIN_INTERVAL)
         # Eq. 12 applied to the solver's answer makes it feasible everywhere (dense check).
-        rescale = problem.scale_factor(intervals)
+        ratio, dense_span, dense_fraction = problem.dense_wafer_ratio(intervals)
+        rescale = problem.scale_factor(intervals, ratio.max())
         if rescale * intervals.sum() < best.sum():
             best = rescale * intervals
         if rescale <= 1.0 + RESCALE_TOLERANCE:
             return Timing(best, start, scale, True, iterations, rounds, len(span))
         # Between samples the limit was exceeded: sample the peaks and solve again.
         rows |= problem.control_constraints(intervals) <= ACTIVE
-        ratio, dense_span, dense_fraction = problem.dense_wafer_ratio(intervals)
         peaks = _peaks_over(ratio, MARGIN * (1.0 + 2e-4))
         span = np.append(span, dense_span[peaks])
         fraction = np.append(fraction, dense_fraction[peaks])
@@ -235,7 +312,7 @@ def _peaks_over(ratio: np.ndarray, threshold: float) -> np.ndarray:
     return np.nonzero(peak)[0]
 
 
-def _solve(problem: TimingProblem, start: np.ndarray, span, fraction, rows):
+def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
     """
     Run SLSQP from ``start``; the variables are the durations relative to ``start``.
 
@@ -246,10 +323,10 @@ def _solve(problem: TimingProblem, start: np.ndarray, span, fraction, rows):
     scale = start.copy()
 
     def values(x):
-        return problem.constraints(x * scale, span, fraction, rows)
+        return problem.constraints(x * scale, samples, rows)
 
-    def gradients(x):  # line searches need values only; gradients (Duals) on request
-        return problem.constraints(ad.Dual.variables(x * scale), span, fraction, rows).d * scale
+    def gradients(x):  # line searches need values only; gradients on request
+        return problem.jacobian(x * scale, samples, rows) * scale
 
     result = minimize(lambda x: float(x @ scale), np.ones_like(scale), jac=lambda x: scale,
                       method='SLSQP', bounds=[(MIN_INTERVAL / v, None) for v in scale],
