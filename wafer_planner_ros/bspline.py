@@ -122,8 +122,12 @@ class CubicBSpline:
         return points, knots, degree
 
     def evaluate(self, t, order: int = 0) -> np.ndarray:
+        """Return q (order 0), q', q'' or q''' at times t (clipped to [0, T]), (len(t), 3)."""
+        return self.evaluate_orders(t, (order,))[0]
+
+    def evaluate_orders(self, t, orders=(0, 1, 2)) -> tuple:
         """
-        Return q (order 0), q', q'' or q''' at times t (clipped to [0, T]), (len(t), 3).
+        Return the derivatives of the given orders at times t, each (len(t), 3).
 
         Each span is a cubic polynomial; its Taylor coefficients at the span's start come
         from the B-spline basis once (``_pieces``), then every time costs one Horner sum.
@@ -133,14 +137,17 @@ class CubicBSpline:
         span = np.clip(np.searchsorted(starts, t, side='right') - 1, 0, len(starts) - 1)
         tau = (t - starts[span])[:, None]
         pieces = coefficients[span]
-        values = pieces[:, DEGREE] * (factorial(DEGREE) / factorial(DEGREE - order))
-        for j in range(DEGREE - 1, order - 1, -1):
-            values = values * tau + pieces[:, j] * (factorial(j) / factorial(j - order))
-        if order == 0:
-            # A clamped curve passes through its end points; make that exact, not rounded.
-            values[t <= 0.0] = self.control_points[0]
-            values[t >= self.duration] = self.control_points[-1]
-        return values
+        out = []
+        for order in orders:
+            values = pieces[:, DEGREE] * (factorial(DEGREE) / factorial(DEGREE - order))
+            for j in range(DEGREE - 1, order - 1, -1):
+                values = values * tau + pieces[:, j] * (factorial(j) / factorial(j - order))
+            if order == 0:
+                # A clamped curve passes through its end points; make that exact.
+                values[t <= 0.0] = self.control_points[0]
+                values[t >= self.duration] = self.control_points[-1]
+            out.append(values)
+        return tuple(out)
 
     @cached_property
     def _pieces(self) -> tuple:

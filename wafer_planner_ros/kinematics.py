@@ -76,11 +76,12 @@ class PlanarArm:
         being the cumulative joint velocities and accelerations. Plain arithmetic, so it
         also runs on complex values (the time optimisation's complex-step derivatives).
         """
-        theta, omega, alpha = (np.cumsum(x, axis=-1) for x in (q, qd, qdd))
+        cumulative = np.triu(np.ones((3, 3)))  # (x @ cumulative)_j = x_1 + ... + x_j
+        theta, omega, alpha = (x @ cumulative for x in (q, qd, qdd))
         c, s = np.cos(theta), np.sin(theta)
         spin = omega * omega
-        ax = np.sum((-alpha * s - spin * c) * self.link_lengths, axis=-1)
-        ay = np.sum((alpha * c - spin * s) * self.link_lengths, axis=-1)
+        ax = -(alpha * s + spin * c) @ self.link_lengths
+        ay = (alpha * c - spin * s) @ self.link_lengths
         return ax, ay
 
     def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:

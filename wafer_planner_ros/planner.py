@@ -251,9 +251,9 @@ class Planner:
         period = self.settings.sample_period
         times = np.arange(0.0, spline.duration - 1e-9, period)
         times = np.append(times, spline.duration)
+        positions, velocities, accelerations = spline.evaluate_orders(times)
         return replace(result, verification=checked, metrics=metrics, times=times,
-                       positions=spline.evaluate(times), velocities=spline.evaluate(times, 1),
-                       accelerations=spline.evaluate(times, 2))
+                       positions=positions, velocities=velocities, accelerations=accelerations)
 
 
 class _Clock:

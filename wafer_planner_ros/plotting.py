@@ -87,7 +87,7 @@ def plot_trajectory(cell, result, path, outlines: int = 14) -> None:
     """Write a PNG of a plan like the paper's Figs. 10-13: motion, joints, wafer."""
     robot, spline = cell.robot, result.spline
     t = np.linspace(0.0, spline.duration, 1500)
-    q, qd, qdd = (spline.evaluate(t, order) for order in range(3))
+    q, qd, qdd = spline.evaluate_orders(t)
     wafer = robot.arm.wafer_acceleration(q, qd, qdd)
     fig = plt.figure(figsize=(16, 9))
     grid = fig.add_gridspec(3, 3)

@@ -81,17 +81,16 @@ class Samples:
     Instants where the wafer acceleration is constrained, with each one's piece of spline.
 
     A point in span s depends on the control points P_s..P_{s+3} and on the knots
-    t_s..t_{s+7} only, i.e. on the durations h_{s-3}..h_{s+3} (``window``; those beyond the
-    ends are the clamped knots' zero lengths). Evaluating every sample on its own window
-    keeps the arrays small, and lets the Jacobian perturb each sample's own durations only.
+    t_s..t_{s+7} only, i.e. on the durations h_{s-3}..h_{s+3} (its ``window``; those beyond
+    the ends are the clamped knots' zero lengths). Evaluating every sample on its own
+    window keeps the arrays small, and lets the Jacobian perturb each sample's own
+    durations only.
     """
 
     span: np.ndarray
     fraction: np.ndarray
     window: np.ndarray
-    """(K, 7) indices of h_{s-3}..h_{s+3}, clipped into range."""
-    inside: np.ndarray
-    """(K, 7) whether each window entry is a real span."""
+    """(K, 7) indices of h_{s-3}..h_{s+3} in h padded with three zeros at each end."""
     points: np.ndarray
     """(K, 4, 3) the control points P_s..P_{s+3}."""
 
@@ -102,7 +101,10 @@ class Samples:
     def local(self, intervals) -> np.ndarray:
         """Return each sample's window of durations, (..., K, 7), from intervals (..., m)."""
         intervals = np.asarray(intervals)
-        return np.where(self.inside, intervals[..., self.window], 0.0)
+        padded = np.zeros(intervals.shape[:-1] + (intervals.shape[-1] + 2 * DEGREE,),
+                          dtype=intervals.dtype)
+        padded[..., DEGREE:-DEGREE] = intervals
+        return padded[..., self.window]
 
 
 class TimingProblem:
@@ -120,10 +122,8 @@ class TimingProblem:
     def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
         """Return the samples at ``fraction`` (0..1) of the given spans."""
         span = np.asarray(span, int)
-        window = span[:, None] + np.arange(-DEGREE, DEGREE + 1)
-        inside = (window >= 0) & (window < self.spans)
         return Samples(span=span, fraction=np.asarray(fraction, float),
-                       window=np.clip(window, 0, self.spans - 1), inside=inside,
+                       window=span[:, None] + np.arange(2 * DEGREE + 1),
                        points=self.points[span[:, None] + np.arange(DEGREE + 1)])
 
     def states(self, local, samples: Samples) -> tuple:
@@ -185,34 +185,36 @@ class TimingProblem:
                                self.wafer_constraints(samples.local(intervals), samples)],
                               axis=-1)
 
-    def jacobian(self, intervals: np.ndarray, samples: Samples, rows=None) -> np.ndarray:
+    def linearise(self, intervals: np.ndarray, samples: Samples, rows=None) -> tuple:
         """
-        Return d(constraints)/d(intervals), (rows, m), exact (complex step).
+        Return the constraint values and their exact Jacobian (rows, m) (complex step).
 
         Control points take the whole batch ``h + i ε I``; each wafer sample perturbs only
-        the five durations h_{s-2}..h_{s+2} its value depends on.
+        the five durations h_{s-2}..h_{s+2} its value depends on. The real parts are the
+        values themselves.
         """
         intervals = np.asarray(intervals, float)
         step = 1j * COMPLEX_STEP
         control = self.control_constraints(intervals + step * np.eye(len(intervals)))
-        control = (control if rows is None else control[..., rows]).imag.T
+        if rows is not None:
+            control = control[..., rows]
         own = np.arange(1, 2 * DEGREE)  # window positions of h_{s-2}..h_{s+2}
         local = samples.local(intervals) + step * np.eye(2 * DEGREE + 1)[own][:, None, :]
-        wafer = self.wafer_constraints(local, samples).imag.T  # (c * K, 5)
-        parts = wafer.shape[0] // len(samples)
-        columns = np.tile(samples.window[:, own], (parts, 1))
-        real = np.tile(samples.inside[:, own], (parts, 1))
-        dense = np.zeros((wafer.shape[0], len(intervals)))
-        row = np.broadcast_to(np.arange(wafer.shape[0])[:, None], columns.shape)
-        dense[row[real], columns[real]] = wafer[real]
-        return np.vstack([control, dense]) / COMPLEX_STEP
+        wafer = self.wafer_constraints(local, samples)  # (5, c * K)
+        parts = wafer.shape[1] // len(samples)
+        padded = np.zeros((wafer.shape[1], len(intervals) + 2 * DEGREE))
+        np.put_along_axis(padded, np.tile(samples.window[:, own], (parts, 1)), wafer.imag.T,
+                          axis=1)  # derivatives by the zero lengths fall in the padding
+        values = np.concatenate([control[0].real, wafer[0].real])
+        jacobian = np.vstack([control.imag.T, padded[:, DEGREE:-DEGREE]]) / COMPLEX_STEP
+        return values, jacobian
 
     def dense_wafer_ratio(self, intervals: np.ndarray) -> tuple:
         """Return (ratio, span, fraction): the worst of x, y, |a| every DENSE_STEP seconds."""
         span, fraction = dense_grid(intervals)
         spline = CubicBSpline.from_intervals(self.points, intervals)
         t = spline.knots[span + DEGREE] + intervals[span] * fraction
-        ax, ay = self.arm.wafer_acceleration_xy(*(spline.evaluate(t, k) for k in range(3)))
+        ax, ay = self.arm.wafer_acceleration_xy(*spline.evaluate_orders(t))
         ratio = np.maximum(np.abs(ax) / self.wafer[0], np.abs(ay) / self.wafer[1])
         if self.wafer_norm is not None:
             ratio = np.maximum(ratio, np.hypot(ax, ay) / self.wafer_norm)
@@ -321,12 +323,19 @@ def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
     the durations themselves.
     """
     scale = start.copy()
+    last = {}
+
+    def linearised(x):  # SLSQP asks for values, then gradients, at each new point
+        if last.get('x') is None or not np.array_equal(last['x'], x):
+            values, jacobian = problem.linearise(x * scale, samples, rows)
+            last.update(x=x.copy(), values=values, gradients=jacobian * scale)
+        return last
 
     def values(x):
-        return problem.constraints(x * scale, samples, rows)
+        return linearised(x)['values']
 
-    def gradients(x):  # line searches need values only; gradients on request
-        return problem.jacobian(x * scale, samples, rows) * scale
+    def gradients(x):
+        return linearised(x)['gradients']
 
     result = minimize(lambda x: float(x @ scale), np.ones_like(scale), jac=lambda x: scale,
                       method='SLSQP', bounds=[(MIN_INTERVAL / v, None) for v in scale],

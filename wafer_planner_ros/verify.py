@@ -45,7 +45,7 @@ def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
     limits = robot.limits
     duration = spline.duration
     t = np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
-    q, qd, qdd, qddd = (spline.evaluate(t, order) for order in range(4))
+    q, qd, qdd, qddd = spline.evaluate_orders(t, range(4))
     wafer = robot.arm.wafer_acceleration(q, qd, qdd)
     ratios = {
         'velocity': _ratio(qd, limits.velocity),
