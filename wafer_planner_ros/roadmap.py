@@ -11,7 +11,6 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from wafer_planner_ros.certify import certify_segments
 
 SAMPLER_NAMES = ('uniform', 'gaussian', 'bridge')
 STATION_SAMPLER = -1  # sampler index stored for station nodes
@@ -126,24 +125,3 @@ class Roadmap:
         """Return, per station, the set of components its nodes lie in."""
         return {name: {int(self.components[node]) for _, node in entries}
                 for name, entries in self.stations.items()}
-
-    def connect(self, model, lipschitz: np.ndarray, q: np.ndarray, neighbors=None):
-        """
-        Return certified edges from a free configuration q to its nearest nodes.
-
-        Returns ``(nodes, lengths)``: the indices of the nodes q can reach in a straight
-        certified line among its ``neighbors`` nearest (default ``station_neighbors``), and
-        the joint-space lengths. Raises ValueError when q itself is not free.
-        """
-        q = np.asarray(q, dtype=float)
-        dq = model.body_clearance(q[None])
-        if np.any(dq <= 0.0):
-            raise ValueError(f'configuration {q.tolist()} is in collision')
-        k = min(neighbors or self.settings.station_neighbors, self.node_count)
-        _, index = self.tree.query(q, k=k)
-        index = np.atleast_1d(index)
-        ok, _ = certify_segments(model, lipschitz, np.broadcast_to(q, (len(index), 3)),
-                                 self.nodes[index], np.repeat(dq, len(index), axis=0),
-                                 self.clearance[index])
-        index = index[ok]
-        return index, np.linalg.norm(self.nodes[index] - q, axis=1)
