@@ -8,6 +8,7 @@ from wafer_planner_ros.bspline import CubicBSpline
 from wafer_planner_ros.corridor import build_corridor
 from wafer_planner_ros.search import find_path
 from wafer_planner_ros.timing import MARGIN, optimise, TimingProblem
+from wafer_planner_ros.verify import collision_times, COLLISION_STEP
 
 
 @pytest.fixture()
@@ -53,6 +54,28 @@ def _station_corridor(cell, roadmap, start, goal):
     path = find_path(roadmap, model, cell.robot.lipschitz, cell.stations[start].configs[0].q,
                      cell.stations[goal].configs[0].q)[0]
     return build_corridor(path, model.body_clearance(path), cell.robot.lipschitz)
+
+
+def test_peak_speed_is_the_exact_maximum_on_each_piece(spline):
+    boundaries, peaks = spline.peak_speed(subdivisions=4)
+    assert boundaries[0] == 0.0 and boundaries[-1] == spline.duration
+    for lo, hi, peak in zip(boundaries[:-1], boundaries[1:], peaks):
+        sampled = np.abs(spline.evaluate(np.linspace(lo, hi, 4001), 1)).max(axis=0)
+        assert np.all(sampled <= peak + 1e-12)
+        assert np.allclose(sampled, peak, rtol=1e-5, atol=1e-9)
+
+
+def test_collision_checks_are_at_most_one_milliradian_apart(spline):
+    t = collision_times(spline)
+    assert t[0] == 0.0 and t[-1] == spline.duration and np.all(np.diff(t) > 0)
+    fine = np.concatenate([np.linspace(a, b, 50) for a, b in zip(t[:-1], t[1:])])
+    q = spline.evaluate(fine).reshape(len(t) - 1, 50, 3)
+    moved = np.abs(q - q[:, :1]).max()  # from each check to anywhere before the next
+    assert moved <= COLLISION_STEP + 1e-12
+    # Not wastefully dense: within 10 % of the joint travel in 1 mrad steps.
+    travel = np.abs(np.diff(spline.evaluate(np.linspace(0, spline.duration, 100001)),
+                            axis=0)).max(axis=1).sum()
+    assert len(t) <= 1.1 * travel / COLLISION_STEP + 8 * len(spline.intervals)
 
 
 def test_every_span_lies_in_a_safe_box_or_on_a_path_segment(default_cell, default_roadmap):

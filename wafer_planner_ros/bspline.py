@@ -149,6 +149,28 @@ class CubicBSpline:
             out.append(values)
         return tuple(out)
 
+    def peak_speed(self, subdivisions: int = 8) -> tuple:
+        """
+        Return (boundaries, peaks): each span cut into ``subdivisions`` equal pieces.
+
+        ``boundaries`` (S + 1,) are the pieces' times and ``peaks`` (S, 3) the exact largest
+        |q'_j| on each: q' is a quadratic on a span, so its extreme on a piece is at an end
+        or where q'' = 0.
+        """
+        starts, coefficients = self._pieces
+        steps = np.arange(subdivisions + 1) / subdivisions
+        tau = steps[None, :, None] * self.intervals[:, None, None]          # (m, P + 1, 1)
+        c1, c2, c3 = (coefficients[:, None, k] for k in (1, 2, 3))          # (m, 1, 3)
+        speed = np.abs(c1 + tau * (2.0 * c2 + 3.0 * c3 * tau))               # (m, P + 1, 3)
+        peaks = np.maximum(speed[:, :-1], speed[:, 1:])
+        with np.errstate(divide='ignore', invalid='ignore'):
+            turn = np.where(c3 != 0.0, -c2 / (3.0 * c3), -1.0)               # q'' = 0
+        inside = (turn > tau[:, :-1]) & (turn < tau[:, 1:])
+        extreme = np.abs(c1 + turn * (2.0 * c2 + 3.0 * c3 * turn))
+        peaks = np.where(inside, np.maximum(peaks, extreme), peaks)
+        boundaries = (starts[:, None] + tau[:, :-1, 0]).ravel()
+        return np.append(boundaries, self.duration), peaks.reshape(-1, 3)
+
     @cached_property
     def _pieces(self) -> tuple:
         """Return (span start times (m,), Taylor coefficients (m, 4, 3) at those starts)."""

@@ -2,10 +2,9 @@
 Verification of a trajectory before it leaves the planner (SPEC section 3.9).
 
 Limits are checked every ``LIMIT_STEP`` seconds, collisions at configurations no more than
-``COLLISION_STEP`` rad apart in any joint: the time step between collision checks is
-``COLLISION_STEP / max_i v_i``, v_i being the largest velocity control point of joint i,
-which bounds the joint's speed everywhere (convex-hull property). Also checked: the start
-and goal are hit exactly, and velocity and acceleration are zero at both ends.
+``COLLISION_STEP`` rad apart in any joint: on each eighth of a span the time step between
+collision checks is ``COLLISION_STEP`` over the exact peak joint speed there. Also checked:
+the start and goal are hit exactly, and velocity and acceleration are zero at both ends.
 """
 
 from dataclasses import dataclass, field
@@ -81,18 +80,22 @@ def _ratio(values: np.ndarray, limit) -> float:
 
 
 def dense_clearance(spline, model) -> tuple:
-    """
-    Return (smallest clearance, checks) at configurations <= COLLISION_STEP rad apart.
-
-    In span s the joints' speed is bounded by the span's three velocity control points
-    (convex hull), so checks there are ``COLLISION_STEP / that bound`` seconds apart.
-    """
-    velocity = np.abs(spline.derivative(1)[0]).max(axis=1)      # per control point
-    speed = np.maximum(np.maximum(velocity[:-2], velocity[1:-1]), velocity[2:])
-    intervals = spline.intervals
-    counts = np.maximum(np.ceil(intervals * speed / COLLISION_STEP).astype(int), 1)
-    starts = spline.knots[3:-4]
-    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    t = np.repeat(starts, counts) + offsets * np.repeat(intervals / counts, counts)
-    q = spline.evaluate(np.append(t, spline.duration))
+    """Return (smallest clearance, checks) at the times of ``collision_times``."""
+    q = spline.evaluate(collision_times(spline))
     return float(model.clearance(q).min()), len(q)
+
+
+def collision_times(spline) -> np.ndarray:
+    """
+    Return check times such that no joint moves more than COLLISION_STEP between two.
+
+    Each span is cut into pieces on which the exact peak joint speed is known
+    (``CubicBSpline.peak_speed``); checks on a piece are ``COLLISION_STEP / that peak``
+    seconds apart. The first and last times are 0 and the duration.
+    """
+    boundaries, peaks = spline.peak_speed()
+    lengths = np.diff(boundaries)
+    counts = np.maximum(np.ceil(lengths * peaks.max(axis=1) / COLLISION_STEP).astype(int), 1)
+    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    t = np.repeat(boundaries[:-1], counts) + offsets * np.repeat(lengths / counts, counts)
+    return np.append(t, spline.duration)
