@@ -8,7 +8,7 @@ from wafer_planner_ros.bspline import CubicBSpline
 from wafer_planner_ros.corridor import build_corridor
 from wafer_planner_ros.search import find_path
 from wafer_planner_ros.timing import MARGIN, optimise, TimingProblem
-from wafer_planner_ros.verify import collision_times, COLLISION_STEP
+from wafer_planner_ros.verify import COLLISION_STEP, collision_times
 
 
 @pytest.fixture()
