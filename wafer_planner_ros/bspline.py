@@ -5,18 +5,25 @@ The knots are a time sequence: four at 0, the interior times, four at the total 
 that the curve starts at the first control point and ends at the last. Derivatives are
 B-splines of lower degree whose control points (Eq. 6-7) are
 ``CPV_i = 3 (CP_{i+1} - CP_i) / (t_{i+4} - t_{i+1})`` and so on; by the convex-hull
-property bounding them bounds the derivative everywhere (Eq. 8). The functions below take
-knots and points with any leading (batch) axes and use plain arithmetic only, so they also
-run on complex values: that is how the time optimisation differentiates them (complex step).
+property bounding them bounds the derivative everywhere (Eq. 8).
+
+A point in span s (between knots t_{s+3} and t_{s+4}) depends only on the control points
+P_s..P_{s+3} and the knots t_s..t_{s+7}, i.e. on the seven durations h_{s-3}..h_{s+3}
+around it (zero beyond the clamped ends): ``window_states`` evaluates it from that window
+alone. It is compiled (numba) and plain arithmetic, so it also runs on complex durations:
+that is how the time optimisation differentiates it (complex step).
 """
 
 from dataclasses import dataclass
 from functools import cached_property
 from math import factorial
 
+from numba import njit
 import numpy as np
 
 DEGREE = 3
+WINDOW = 2 * DEGREE + 1
+"""Durations a span's points depend on: h_{s-3}..h_{s+3}."""
 
 
 def knots_from_intervals(intervals):
@@ -27,50 +34,6 @@ def knots_from_intervals(intervals):
     return np.concatenate([zeros, times, np.repeat(times[..., -1:], DEGREE, axis=-1)], axis=-1)
 
 
-def basis(knots, span: np.ndarray, t, degree: int) -> list:
-    """
-    Return the degree+1 non-zero basis functions at t (The NURBS Book, A2.2).
-
-    ``span[s]`` is the knot index i with knots[i] <= t[s] < knots[i+1]; the functions are
-    N_{i-degree}, ..., N_i, each an array over the samples (``knots`` (..., k) and ``t``
-    (..., s) may have leading batch axes).
-    """
-    return basis_levels(knots, span, t, degree)[degree]
-
-
-def basis_levels(knots, span: np.ndarray, t, degree: int) -> list:
-    """
-    Return the non-zero basis functions of every degree 0..degree at t, from one recursion.
-
-    Entry d holds N_{i-d,d}, ..., N_{i,d} on ``knots``; these are also the degree-d basis
-    functions of the (degree - d)-th derivative spline, whose knots drop (degree - d) knots
-    at each end, at its span i - (degree - d).
-    """
-    funcs = [np.ones_like(span, dtype=float)]
-    levels = [list(funcs)]
-    left, right = [None], [None]
-    for j in range(1, degree + 1):
-        left.append(t - knots[..., span + 1 - j])
-        right.append(knots[..., span + j] - t)
-        saved = 0.0
-        for r in range(j):
-            temp = funcs[r] / (right[r + 1] + left[j - r])
-            funcs[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        funcs.append(saved)
-        levels.append(list(funcs))
-    return levels
-
-
-def combine(funcs: list, points, span: np.ndarray, degree: int):
-    """Return sum_r funcs[r] * points[span - degree + r] (points (..., n, d))."""
-    total = None
-    for r, f in enumerate(funcs):
-        term = points[..., span - degree + r, :] * f[..., None]
-        total = term if total is None else total + term
-    return total
-
-
 def derivative_points(points, knots, degree: int):
     """Return the control points (..., n - 1, d) of the derivative spline (Eq. 6-7)."""
     n = points.shape[-2]
@@ -78,10 +41,81 @@ def derivative_points(points, knots, degree: int):
     return (points[..., 1:, :] - points[..., :-1, :]) * degree / width[..., None]
 
 
-def find_span(knots: np.ndarray, t: np.ndarray, n_points: int, degree: int) -> np.ndarray:
-    """Return the knot span index of each time (the last span includes the end time)."""
-    span = np.searchsorted(knots, t, side='right') - 1
-    return np.clip(span, degree, n_points - 1)
+def padded_windows(intervals: np.ndarray, span: np.ndarray) -> tuple:
+    """Return (durations padded with three zeros at each end, window indices (K, 7))."""
+    padded = np.concatenate([np.zeros(DEGREE), intervals, np.zeros(DEGREE)])
+    return padded, np.asarray(span)[:, None] + np.arange(WINDOW)
+
+
+@njit(cache=True)
+def window_states(h, points, fraction):
+    """
+    Return q, q', q'', q''' (4, 3) at ``fraction`` (0..1) of a span.
+
+    ``h`` (7,): the durations h_{s-3}..h_{s+3} (float or complex); ``points`` (4, 3): the
+    control points P_s..P_{s+3}. The derivative control points follow Eq. 6-7 and the
+    basis functions the Cox-de Boor recursion (The NURBS Book, A2.2) on the local knots.
+    """
+    knots = np.zeros(WINDOW + 1, dtype=h.dtype)  # t_s..t_{s+7}, relative to t_s
+    for j in range(WINDOW):
+        knots[j + 1] = knots[j] + h[j]
+    velocity = np.zeros((3, 3), dtype=h.dtype)
+    for r in range(3):
+        for i in range(3):
+            velocity[r, i] = 3.0 * (points[r + 1, i] - points[r, i]) \
+                / (knots[r + 4] - knots[r + 1])
+    acceleration = np.zeros((2, 3), dtype=h.dtype)
+    for r in range(2):
+        for i in range(3):
+            acceleration[r, i] = 2.0 * (velocity[r + 1, i] - velocity[r, i]) \
+                / (knots[r + 4] - knots[r + 2])
+    t = knots[DEGREE] + h[DEGREE] * fraction
+    left = np.zeros(DEGREE + 1, dtype=h.dtype)
+    right = np.zeros(DEGREE + 1, dtype=h.dtype)
+    funcs = np.zeros(DEGREE + 1, dtype=h.dtype)
+    funcs[0] = 1.0
+    out = np.zeros((DEGREE + 1, 3), dtype=h.dtype)
+    for j in range(1, DEGREE + 1):
+        left[j] = t - knots[DEGREE + 1 - j]
+        right[j] = knots[DEGREE + j] - t
+        saved = 0.0 * h[0]
+        for r in range(j):
+            temp = funcs[r] / (right[r + 1] + left[j - r])
+            funcs[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        funcs[j] = saved
+        # Degree-j functions weight the control points of derivative 3 - j.
+        for i in range(3):
+            total = 0.0 * h[0]
+            for r in range(j + 1):
+                if j == 1:
+                    total += funcs[r] * acceleration[r, i]
+                elif j == 2:
+                    total += funcs[r] * velocity[r, i]
+                else:
+                    total += funcs[r] * points[r, i]
+            out[DEGREE - j, i] = total
+    for i in range(3):
+        out[DEGREE, i] = (acceleration[1, i] - acceleration[0, i]) / h[DEGREE]
+    return out
+
+
+@njit(cache=True)
+def _states_many(padded, windows, points, span, fraction):
+    """Return window_states for many (span, fraction) samples, (K, 4, 3)."""
+    out = np.empty((len(span), DEGREE + 1, 3))
+    for k in range(len(span)):
+        out[k] = window_states(padded[windows[k]], points[span[k]:span[k] + DEGREE + 1],
+                               fraction[k])
+    return out
+
+
+def states(control_points: np.ndarray, intervals: np.ndarray, span, fraction) -> np.ndarray:
+    """Return q, q', q'', q''' (K, 4, 3) at ``fraction`` of each ``span``."""
+    span = np.asarray(span, np.int64)
+    padded, windows = padded_windows(np.asarray(intervals, float), span)
+    return _states_many(padded, windows, np.asarray(control_points, float), span,
+                        np.asarray(fraction, float))
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,15 +208,8 @@ class CubicBSpline:
     @cached_property
     def _pieces(self) -> tuple:
         """Return (span start times (m,), Taylor coefficients (m, 4, 3) at those starts)."""
+        intervals = self.intervals
         starts = self.knots[DEGREE:-DEGREE - 1]
-        coefficients = np.stack([self._from_basis(starts, k) / factorial(k)
-                                 for k in range(DEGREE + 1)], axis=1)
-        return starts, coefficients
-
-    def _from_basis(self, t: np.ndarray, order: int) -> np.ndarray:
-        """Return the order-th derivative at times t from the B-spline basis (Eq. 4-7)."""
-        points, knots, degree = self.derivative(order)
-        span = find_span(knots, t, len(points), degree)
-        if degree == 0:
-            return points[span].copy()
-        return combine(basis(knots, span, t, degree), points, span, degree)
+        at_start = states(self.control_points, intervals, np.arange(len(intervals)),
+                          np.zeros(len(intervals)))
+        return starts, at_start / np.array([factorial(k) for k in range(DEGREE + 1)])[:, None]

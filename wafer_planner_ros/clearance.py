@@ -13,12 +13,11 @@ the fast path used to build the roadmap; ``fcl_model`` is the reference it is te
 
 from dataclasses import dataclass
 
+from numba import njit
 import numpy as np
 
 from wafer_planner_ros.geometry import point_segment_distance
 from wafer_planner_ros.kinematics import PlanarArm
-
-_CHUNK = 16384  # configurations per vectorised batch: bounds temporary memory to ~10 MB
 
 
 @dataclass(frozen=True)
@@ -78,44 +77,7 @@ class ClearanceModel:
 
     def edge_distances(self, q: np.ndarray) -> np.ndarray:
         """Return the distance of each body's spine to each edge (m), shape (N, 4, E)."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        geometry = self._spines(q)
-        return np.stack([self._to_edge(geometry, e) for e in range(len(self.edge_start))],
-                        axis=-1)
-
-    def _spines(self, q: np.ndarray) -> tuple:
-        """Return the link spines' coordinates, as separate x/y arrays (fast in numpy)."""
-        points = self.arm.joint_points(q)
-        x, y = points[..., 0], points[..., 1]             # base, elbow, wrist, centre
-        ax, ay, bx, by = x[:, :3], y[:, :3], x[:, 1:], y[:, 1:]
-        abx, aby = bx - ax, by - ay
-        return ax, ay, bx, by, abx, aby, np.maximum(abx * abx + aby * aby, 1e-300)
-
-    def _to_edge(self, geometry: tuple, e: int) -> np.ndarray:
-        """Return the distance (N, 4) of every body's spine to edge e."""
-        ax, ay, bx, by, abx, aby, ab2 = geometry
-        (cx, cy), (dx, dy) = self.edge_start[e], self.edge_end[e]
-        ex, ey = dx - cx, dy - cy
-        # Elbow, wrist and wafer centre (the links' far ends) to the edge.
-        s = np.clip(((bx - cx) * ex + (by - cy) * ey) / self._edge_len_sq[e], 0.0, 1.0)
-        px, py = bx - cx - s * ex, by - cy - s * ey
-        ends = np.sqrt(px * px + py * py)
-        starts = np.empty_like(ends)
-        starts[:, 0] = self._base_dist[e]
-        starts[:, 1:] = ends[:, :2]
-        links = np.minimum(ends, starts)
-        # The edge's two vertices to each link.
-        for vx, vy in ((cx, cy), (dx, dy)):
-            t = np.clip(((vx - ax) * abx + (vy - ay) * aby) / ab2, 0.0, 1.0)
-            wx, wy = vx - ax - t * abx, vy - ay - t * aby
-            links = np.minimum(links, np.sqrt(wx * wx + wy * wy))
-        # A link crossing the edge is at distance zero.
-        side_c = abx * (cy - ay) - aby * (cx - ax)
-        side_d = abx * (dy - ay) - aby * (dx - ax)
-        side_a = ex * (ay - cy) - ey * (ax - cx)
-        side_b = ex * (by - cy) - ey * (bx - cx)
-        links[(side_c * side_d <= 0.0) & (side_a * side_b <= 0.0)] = 0.0
-        return np.concatenate([links, ends[:, 2:]], axis=1)
+        return self._distances(q, per_edge=True)
 
     def body_clearance(self, q: np.ndarray) -> np.ndarray:
         """
@@ -125,15 +87,14 @@ class ClearanceModel:
         configuration only the non-positive values mean something: a body beyond a link that
         crosses the boundary can be wholly outside it and still show a positive value.
         """
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        out = np.empty((len(q), len(self.radii)))
-        for lo in range(0, len(q), _CHUNK):
-            geometry = self._spines(q[lo:lo + _CHUNK])
-            nearest = self._to_edge(geometry, 0)
-            for e in range(1, len(self.edge_start)):
-                np.minimum(nearest, self._to_edge(geometry, e), out=nearest)
-            out[lo:lo + _CHUNK] = nearest
-        return out - self.radii
+        return self._distances(q, per_edge=False) - self.radii
+
+    def _distances(self, q: np.ndarray, per_edge: bool) -> np.ndarray:
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=float)))
+        out = _spine_distances(q, np.asarray(self.arm.base, float),
+                               np.asarray(self.arm.link_lengths, float), self.edge_start,
+                               self.edge_end, self._edge_len_sq, self._base_dist, per_edge)
+        return out if per_edge else out[:, :, 0]
 
     def clearance(self, q: np.ndarray) -> np.ndarray:
         """Return the smallest body clearance of each configuration in m, shape (N,)."""
@@ -151,3 +112,56 @@ class ClearanceModel:
                        obstacle=self.owner_names[self.edge_owner[edge]],
                        clearance=float(gaps[body, edge]),
                        crossing=bool(gaps[body, edge] == -self.radii[body]))
+
+
+@njit(cache=True)
+def _spine_distances(q, base, link_lengths, edge_start, edge_end, edge_len_sq, base_dist,
+                     per_edge):
+    """
+    Return each body's spine distance to every edge (N, 4, E), or to the nearest (N, 4, 1).
+
+    The links are the segments base-elbow, elbow-wrist, wrist-centre; the wafer's spine is
+    the centre. A link crossing an edge is at distance zero.
+    """
+    edges = len(edge_start)
+    out = np.empty((len(q), 4, edges if per_edge else 1))
+    x, y = np.empty(4), np.empty(4)
+    for n in range(len(q)):
+        x[0], y[0] = base[0], base[1]
+        theta, cx_, cy_ = 0.0, 0.0, 0.0
+        for j in range(3):  # joint points: base + cumulative link vectors
+            theta += q[n, j]
+            cx_ += link_lengths[j] * np.cos(theta)
+            cy_ += link_lengths[j] * np.sin(theta)
+            x[j + 1], y[j + 1] = base[0] + cx_, base[1] + cy_
+        out[n] = np.inf
+        for e in range(edges):
+            cx, cy = edge_start[e, 0], edge_start[e, 1]
+            dx, dy = edge_end[e, 0], edge_end[e, 1]
+            ex, ey = dx - cx, dy - cy
+            start = base_dist[e]
+            column = e if per_edge else 0
+            for j in range(3):
+                ax, ay, bx, by = x[j], y[j], x[j + 1], y[j + 1]
+                # The link's far end to the edge.
+                s = min(max(((bx - cx) * ex + (by - cy) * ey) / edge_len_sq[e], 0.0), 1.0)
+                px, py = bx - cx - s * ex, by - cy - s * ey
+                end = np.sqrt(px * px + py * py)
+                gap = min(end, start)
+                # The edge's two vertices to the link.
+                abx, aby = bx - ax, by - ay
+                ab2 = max(abx * abx + aby * aby, 1e-300)
+                for vx, vy in ((cx, cy), (dx, dy)):
+                    t = min(max(((vx - ax) * abx + (vy - ay) * aby) / ab2, 0.0), 1.0)
+                    wx, wy = vx - ax - t * abx, vy - ay - t * aby
+                    gap = min(gap, np.sqrt(wx * wx + wy * wy))
+                side_c = abx * (cy - ay) - aby * (cx - ax)
+                side_d = abx * (dy - ay) - aby * (dx - ax)
+                side_a = ex * (ay - cy) - ey * (ax - cx)
+                side_b = ex * (by - cy) - ey * (bx - cx)
+                if side_c * side_d <= 0.0 and side_a * side_b <= 0.0:
+                    gap = 0.0
+                out[n, j, column] = min(out[n, j, column], gap)
+                start = end
+            out[n, 3, column] = min(out[n, 3, column], start)  # the wafer centre
+    return out

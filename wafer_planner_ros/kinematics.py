@@ -8,6 +8,7 @@ the leading axes.
 
 from dataclasses import dataclass
 
+from numba import njit
 import numpy as np
 
 
@@ -68,21 +69,13 @@ class PlanarArm:
         return np.stack(self.wafer_acceleration_xy(q, qd, qdd), axis=-1)
 
     def wafer_acceleration_xy(self, q, qd, qdd) -> tuple:
-        """
-        Return the wafer-centre acceleration's x and y components (m/s^2).
-
-        p = base + sum_j l_j (cos th_j, sin th_j) with th_j = q_1 + ... + q_j, so
-        p'' = sum_j l_j (a_j (-sin th_j, cos th_j) - w_j^2 (cos th_j, sin th_j)), w and a
-        being the cumulative joint velocities and accelerations. Plain arithmetic, so it
-        also runs on complex values (the time optimisation's complex-step derivatives).
-        """
-        cumulative = np.triu(np.ones((3, 3)))  # (x @ cumulative)_j = x_1 + ... + x_j
-        theta, omega, alpha = (x @ cumulative for x in (q, qd, qdd))
-        c, s = np.cos(theta), np.sin(theta)
-        spin = omega * omega
-        ax = -(alpha * s + spin * c) @ self.link_lengths
-        ay = (alpha * c - spin * s) @ self.link_lengths
-        return ax, ay
+        """Return the wafer-centre acceleration's x and y components (m/s^2), each (...,)."""
+        q, qd, qdd = (np.asarray(x, dtype=float) for x in (q, qd, qdd))
+        shape = np.broadcast_shapes(q.shape, qd.shape, qdd.shape)
+        q, qd, qdd = (np.ascontiguousarray(np.broadcast_to(x, shape).reshape(-1, 3))
+                      for x in (q, qd, qdd))
+        ax, ay = _wafer_acceleration_many(np.asarray(self.link_lengths, float), q, qd, qdd)
+        return ax.reshape(shape[:-1]), ay.reshape(shape[:-1])
 
     def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:
         """
@@ -115,3 +108,30 @@ def wrap_into_limits(q: np.ndarray, position_limits: np.ndarray):
     shifted = q + 2.0 * np.pi * np.ceil((lower - q) / (2.0 * np.pi) - 1e-12)
     inside = (shifted >= lower - 1e-12) & (shifted <= upper + 1e-12)
     return np.clip(shifted, lower, upper) if bool(np.all(inside)) else None
+
+
+@njit(cache=True)
+def wafer_acceleration_point(link_lengths, q, qd, qdd):
+    """
+    Return the wafer-centre acceleration (ax, ay) of one state (float or complex).
+
+    p = base + sum_j l_j (cos th_j, sin th_j) with th_j = q_1 + ... + q_j, so
+    p'' = sum_j l_j (a_j (-sin th_j, cos th_j) - w_j^2 (cos th_j, sin th_j)), w and a
+    being the cumulative joint velocities and accelerations.
+    """
+    theta, omega, alpha = 0.0 * q[0], 0.0 * q[0], 0.0 * q[0]
+    ax, ay = 0.0 * q[0], 0.0 * q[0]
+    for j in range(3):
+        theta, omega, alpha = theta + q[j], omega + qd[j], alpha + qdd[j]
+        c, s, spin = np.cos(theta), np.sin(theta), omega * omega
+        ax = ax - link_lengths[j] * (alpha * s + spin * c)
+        ay = ay + link_lengths[j] * (alpha * c - spin * s)
+    return ax, ay
+
+
+@njit(cache=True)
+def _wafer_acceleration_many(link_lengths, q, qd, qdd):
+    ax, ay = np.empty(len(q)), np.empty(len(q))
+    for k in range(len(q)):
+        ax[k], ay[k] = wafer_acceleration_point(link_lengths, q[k], qd[k], qdd[k])
+    return ax, ay

@@ -18,8 +18,9 @@ dense sample of the wafer acceleration so that it is feasible everywhere; SLSQP 
 with exact gradients. They come by the complex step: every constraint is an analytic
 function of h (the B-spline recursion and the kinematics use plain arithmetic), so
 ``Im g(h + i ε e_k) / ε`` is dg/dh_k to machine precision — there is no difference to cancel,
-unlike finite differences — and one vectorised evaluation on the batch ``h + i ε I`` gives
-the whole Jacobian.
+unlike finite differences. A wafer sample in span s depends on h_{s-2}..h_{s+2} only, so
+its row of the Jacobian takes five complex evaluations of its own spline window (compiled,
+``_wafer_rows``); the control-point rows take one vectorised evaluation on ``h + i ε I``.
 
 **Beyond the paper**: sampling the wafer acceleration at the knots lets it exceed the limit
 between them. Every answer of the solver is therefore checked densely (every ``DENSE_STEP``
@@ -36,11 +37,14 @@ samples stays below the true limits that verification applies.
 from dataclasses import dataclass
 import logging
 
+from numba import njit
 import numpy as np
 from scipy.optimize import minimize
 
-from wafer_planner_ros.bspline import basis_levels, combine, CubicBSpline, DEGREE
-from wafer_planner_ros.bspline import derivative_points, knots_from_intervals
+from wafer_planner_ros.bspline import CubicBSpline, DEGREE, derivative_points
+from wafer_planner_ros.bspline import knots_from_intervals, padded_windows, WINDOW
+from wafer_planner_ros.bspline import window_states
+from wafer_planner_ros.kinematics import wafer_acceleration_point
 
 logger = logging.getLogger(__name__)
 
@@ -77,34 +81,14 @@ class Timing:
 
 @dataclass(frozen=True, eq=False)
 class Samples:
-    """
-    Instants where the wafer acceleration is constrained, with each one's piece of spline.
-
-    A point in span s depends on the control points P_s..P_{s+3} and on the knots
-    t_s..t_{s+7} only, i.e. on the durations h_{s-3}..h_{s+3} (its ``window``; those beyond
-    the ends are the clamped knots' zero lengths). Evaluating every sample on its own
-    window keeps the arrays small, and lets the Jacobian perturb each sample's own
-    durations only.
-    """
+    """Instants where the wafer acceleration is constrained: fractions of spans."""
 
     span: np.ndarray
     fraction: np.ndarray
-    window: np.ndarray
-    """(K, 7) indices of h_{s-3}..h_{s+3} in h padded with three zeros at each end."""
-    points: np.ndarray
-    """(K, 4, 3) the control points P_s..P_{s+3}."""
 
     def __len__(self) -> int:
         """Return the number of samples."""
         return len(self.span)
-
-    def local(self, intervals) -> np.ndarray:
-        """Return each sample's window of durations, (..., K, 7), from intervals (..., m)."""
-        intervals = np.asarray(intervals)
-        padded = np.zeros(intervals.shape[:-1] + (intervals.shape[-1] + 2 * DEGREE,),
-                          dtype=intervals.dtype)
-        padded[..., DEGREE:-DEGREE] = intervals
-        return padded[..., self.window]
 
 
 class TimingProblem:
@@ -118,30 +102,13 @@ class TimingProblem:
         self.limits = robot.limits
         self.wafer = robot.wafer_acceleration_limit
         self.wafer_norm = robot.wafer_acceleration_norm_limit
+        # x, y and |a| limits with the margin; 0 means no |a| limit.
+        self._wafer_limits = MARGIN * np.array([self.wafer[0], self.wafer[1],
+                                                self.wafer_norm or 0.0])
 
     def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
         """Return the samples at ``fraction`` (0..1) of the given spans."""
-        span = np.asarray(span, int)
-        return Samples(span=span, fraction=np.asarray(fraction, float),
-                       window=span[:, None] + np.arange(2 * DEGREE + 1),
-                       points=self.points[span[:, None] + np.arange(DEGREE + 1)])
-
-    def states(self, local, samples: Samples) -> tuple:
-        """
-        Return q, q', q'' at the samples, given their windows of durations (..., K, 7).
-
-        ``local`` may carry leading batch axes and be complex (see ``Samples.local``).
-        """
-        knots = np.concatenate([np.zeros(local.shape[:-1] + (1,)), np.cumsum(local, axis=-1)],
-                               axis=-1)  # t_s..t_{s+7}, relative to t_s
-        velocity = derivative_points(samples.points, knots, DEGREE)
-        acceleration = derivative_points(velocity, knots[..., 1:-1], DEGREE - 1)
-        t = knots[..., DEGREE] + local[..., DEGREE] * samples.fraction
-        bases = basis_levels(knots, DEGREE, t, DEGREE)  # serve q, q' and q'' alike
-        q = combine(bases[3], samples.points, DEGREE, DEGREE)
-        qd = combine(bases[2], velocity, DEGREE - 1, 2)
-        qdd = combine(bases[1], acceleration, DEGREE - 2, 1)
-        return q, qd, qdd
+        return Samples(span=np.asarray(span, np.int64), fraction=np.asarray(fraction, float))
 
     def derivatives(self, intervals, jerk=None) -> tuple:
         """
@@ -164,50 +131,47 @@ class TimingProblem:
                                for p, limit in zip(self.derivatives(intervals)[1], bounds)],
                               axis=-1)
 
-    def wafer_constraints(self, local, samples: Samples):
-        """Return the wafer constraints g >= 0 at the samples: x, y (, |a|), (..., c * K)."""
-        ax, ay = self.arm.wafer_acceleration_xy(*self.states(local, samples))
-        parts = [1.0 - _square(ax / (MARGIN * self.wafer[0])),
-                 1.0 - _square(ay / (MARGIN * self.wafer[1]))]
-        if self.wafer_norm is not None:
-            parts.append(1.0 - (ax * ax + ay * ay) / (MARGIN * self.wafer_norm) ** 2)
-        return np.concatenate(parts, axis=-1)
+    def wafer_constraints(self, intervals: np.ndarray, samples: Samples) -> np.ndarray:
+        """Return the wafer constraints g >= 0 at the samples: x, y (, |a|), (c * K,)."""
+        return self._wafer(intervals, samples, False)[0]
 
     def constraints(self, intervals, samples: Samples, rows=None) -> np.ndarray:
         """
-        Return the constraint values g >= 0 with the margin, (..., rows).
+        Return the constraint values g >= 0 with the margin.
 
         ``rows`` selects control-point constraints (a mask over ``control_constraints``);
         the wafer-acceleration constraints at the samples follow.
         """
         control = self.control_constraints(intervals)
-        return np.concatenate([control if rows is None else control[..., rows],
-                               self.wafer_constraints(samples.local(intervals), samples)],
-                              axis=-1)
+        return np.concatenate([control if rows is None else control[rows],
+                               self.wafer_constraints(intervals, samples)])
 
     def linearise(self, intervals: np.ndarray, samples: Samples, rows=None) -> tuple:
-        """
-        Return the constraint values and their exact Jacobian (rows, m) (complex step).
-
-        Control points take the whole batch ``h + i ε I``; each wafer sample perturbs only
-        the five durations h_{s-2}..h_{s+2} its value depends on. The real parts are the
-        values themselves.
-        """
+        """Return the constraint values and their exact Jacobian (rows, m) (complex step)."""
         intervals = np.asarray(intervals, float)
-        step = 1j * COMPLEX_STEP
-        control = self.control_constraints(intervals + step * np.eye(len(intervals)))
+        control = self.control_constraints(
+            intervals + 1j * COMPLEX_STEP * np.eye(len(intervals)))
         if rows is not None:
             control = control[..., rows]
-        own = np.arange(1, 2 * DEGREE)  # window positions of h_{s-2}..h_{s+2}
-        local = samples.local(intervals) + step * np.eye(2 * DEGREE + 1)[own][:, None, :]
-        wafer = self.wafer_constraints(local, samples)  # (5, c * K)
-        parts = wafer.shape[1] // len(samples)
-        padded = np.zeros((wafer.shape[1], len(intervals) + 2 * DEGREE))
-        np.put_along_axis(padded, np.tile(samples.window[:, own], (parts, 1)), wafer.imag.T,
-                          axis=1)  # derivatives by the zero lengths fall in the padding
-        values = np.concatenate([control[0].real, wafer[0].real])
-        jacobian = np.vstack([control.imag.T, padded[:, DEGREE:-DEGREE]]) / COMPLEX_STEP
-        return values, jacobian
+        values, jacobian = self._wafer(intervals, samples, True)
+        return (np.concatenate([control[0].real, values]),
+                np.vstack([control.imag.T / COMPLEX_STEP, jacobian]))
+
+    def _wafer(self, intervals: np.ndarray, samples: Samples, gradients: bool) -> tuple:
+        """Return the wafer constraint values (c * K,) and, if asked, their Jacobian."""
+        padded, windows = padded_windows(np.asarray(intervals, float), samples.span)
+        values, local = _wafer_rows(padded, windows, self.points, samples.span,
+                                    samples.fraction, self.arm.link_lengths,
+                                    self._wafer_limits, gradients)
+        parts = len(values)
+        if not gradients:
+            return values.ravel(), None
+        # Each row has derivatives by h_{s-2}..h_{s+2}; those by the zero lengths beyond
+        # the ends fall in the padding and are dropped.
+        dense = np.zeros((parts * len(samples), len(padded)))
+        np.put_along_axis(dense, np.tile(windows[:, 1:WINDOW - 1], (parts, 1)),
+                          local.reshape(parts * len(samples), WINDOW - 2), axis=1)
+        return values.ravel(), dense[:, DEGREE:-DEGREE]
 
     def dense_wafer_ratio(self, intervals: np.ndarray) -> tuple:
         """Return (ratio, span, fraction): the worst of x, y, |a| every DENSE_STEP seconds."""
@@ -343,3 +307,45 @@ def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
                       options={'maxiter': 200, 'ftol': FTOL})
     result.x = result.x * scale
     return result
+
+
+@njit(cache=True)
+def _wafer_rows(padded, windows, points, span, fraction, link_lengths, limits, gradients):
+    """
+    Return the wafer constraints (c, K) at the samples and, when ``gradients``, (c, K, 5).
+
+    The derivatives are by h_{s-2}..h_{s+2} of each sample's span s, by the complex step.
+    ``limits``: x, y, |a| limits with the margin (|a| absent when 0).
+    """
+    parts = 3 if limits[2] > 0.0 else 2
+    values = np.empty((parts, len(span)))
+    local = np.zeros((parts, len(span), WINDOW - 2))
+    window = np.empty(WINDOW, dtype=np.complex128)
+    for k in range(len(span)):
+        h = padded[windows[k]]
+        p = points[span[k]:span[k] + DEGREE + 1]
+        state = window_states(h, p, fraction[k])
+        g = _wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1], state[2]),
+                     limits)
+        for c in range(parts):
+            values[c, k] = g[c]
+        if not gradients:
+            continue
+        for d in range(WINDOW - 2):
+            window[:] = h
+            window[d + 1] += 1j * COMPLEX_STEP
+            state = window_states(window, p, fraction[k])
+            g = _wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1],
+                                                   state[2]), limits)
+            for c in range(parts):
+                local[c, k, d] = g[c].imag / COMPLEX_STEP
+    return values, local
+
+
+@njit(cache=True)
+def _wafer_g(ax, ay, limits):
+    """Return the x, y and |a| constraint values g = 1 - (a / limit)^2 (float or complex)."""
+    norm = 1.0 + 0.0 * ax
+    if limits[2] > 0.0:
+        norm = 1.0 - (ax * ax + ay * ay) / (limits[2] * limits[2])
+    return (1.0 - (ax / limits[0]) ** 2, 1.0 - (ay / limits[1]) ** 2, norm)
