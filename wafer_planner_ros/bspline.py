@@ -26,19 +26,22 @@ WINDOW = 2 * DEGREE + 1
 """Durations a span's points depend on: h_{s-3}..h_{s+3}."""
 
 
+@njit(cache=True)
 def knots_from_intervals(intervals):
-    """Return the clamped cubic knot vector of span durations h (s): (..., m + 7) knots."""
-    intervals = np.asarray(intervals)
-    times = np.cumsum(intervals, axis=-1)
-    zeros = np.zeros(intervals.shape[:-1] + (DEGREE + 1,), dtype=times.dtype)
-    return np.concatenate([zeros, times, np.repeat(times[..., -1:], DEGREE, axis=-1)], axis=-1)
+    """Return the clamped cubic knot vector of span durations h (s): m + 7 knots."""
+    knots = np.zeros(len(intervals) + 2 * DEGREE + 1, dtype=intervals.dtype)
+    for j in range(len(intervals)):
+        knots[DEGREE + 1 + j] = knots[DEGREE + j] + intervals[j]
+    knots[len(intervals) + DEGREE + 1:] = knots[len(intervals) + DEGREE]
+    return knots
 
 
-def derivative_points(points, knots, degree: int):
-    """Return the control points (..., n - 1, d) of the derivative spline (Eq. 6-7)."""
-    n = points.shape[-2]
-    width = knots[..., 1 + degree:n + degree] - knots[..., 1:n]
-    return (points[..., 1:, :] - points[..., :-1, :]) * degree / width[..., None]
+@njit(cache=True)
+def derivative_points(points, knots, degree):
+    """Return the control points (n - 1, d) of the derivative spline (Eq. 6-7)."""
+    n = points.shape[0]
+    width = knots[1 + degree:n + degree] - knots[1:n]
+    return (points[1:] - points[:-1]) * degree / width.reshape(-1, 1)
 
 
 def padded_windows(intervals: np.ndarray, span: np.ndarray) -> tuple:
@@ -59,16 +62,8 @@ def window_states(h, points, fraction):
     knots = np.zeros(WINDOW + 1, dtype=h.dtype)  # t_s..t_{s+7}, relative to t_s
     for j in range(WINDOW):
         knots[j + 1] = knots[j] + h[j]
-    velocity = np.zeros((3, 3), dtype=h.dtype)
-    for r in range(3):
-        for i in range(3):
-            velocity[r, i] = 3.0 * (points[r + 1, i] - points[r, i]) \
-                / (knots[r + 4] - knots[r + 1])
-    acceleration = np.zeros((2, 3), dtype=h.dtype)
-    for r in range(2):
-        for i in range(3):
-            acceleration[r, i] = 2.0 * (velocity[r + 1, i] - velocity[r, i]) \
-                / (knots[r + 4] - knots[r + 2])
+    velocity = derivative_points(points, knots, DEGREE)
+    acceleration = derivative_points(velocity, knots[1:-1], DEGREE - 1)
     t = knots[DEGREE] + h[DEGREE] * fraction
     left = np.zeros(DEGREE + 1, dtype=h.dtype)
     right = np.zeros(DEGREE + 1, dtype=h.dtype)
@@ -95,8 +90,7 @@ def window_states(h, points, fraction):
                 else:
                     total += funcs[r] * points[r, i]
             out[DEGREE - j, i] = total
-    for i in range(3):
-        out[DEGREE, i] = (acceleration[1, i] - acceleration[0, i]) / h[DEGREE]
+    out[DEGREE] = derivative_points(acceleration, knots[2:-2], DEGREE - 2)[0]
     return out
 
 
@@ -131,7 +125,7 @@ class CubicBSpline:
     def from_intervals(cls, control_points: np.ndarray, intervals: np.ndarray):
         """Return the spline whose spans last ``intervals`` (s); needs len(cp) - 3 of them."""
         control_points = np.asarray(control_points, float)
-        intervals = np.asarray(intervals, float)
+        intervals = np.ascontiguousarray(intervals, float)
         if len(intervals) != len(control_points) - DEGREE:
             raise ValueError(f'{len(control_points)} control points need '
                              f'{len(control_points) - DEGREE} intervals, got {len(intervals)}')

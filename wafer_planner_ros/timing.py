@@ -102,7 +102,12 @@ class TimingProblem:
         self.limits = robot.limits
         self.wafer = robot.wafer_acceleration_limit
         self.wafer_norm = robot.wafer_acceleration_norm_limit
-        # x, y and |a| limits with the margin; 0 means no |a| limit.
+        # Velocity, acceleration (, jerk) limits and x, y, |a| wafer limits with the margin
+        # (0: no |a| limit).
+        orders = [self.limits.velocity, self.limits.acceleration]
+        if self.limits.jerk is not None:
+            orders.append(self.limits.jerk)
+        self._control_limits = MARGIN * np.array(orders, float)
         self._wafer_limits = MARGIN * np.array([self.wafer[0], self.wafer[1],
                                                 self.wafer_norm or 0.0])
 
@@ -115,21 +120,19 @@ class TimingProblem:
         Return (knots, [velocity, acceleration (, jerk)] control points) of a timing.
 
         Jerk control points come when ``jerk`` is True, or by default when the cell limits
-        jerk. ``intervals`` (..., m) may carry leading batch axes and be complex.
+        jerk.
         """
-        knots = knots_from_intervals(intervals)
+        knots = knots_from_intervals(np.ascontiguousarray(intervals, float))
         out = [derivative_points(self.points, knots, DEGREE)]
-        out.append(derivative_points(out[0], knots[..., 1:-1], DEGREE - 1))
+        out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
         if jerk or (jerk is None and self.limits.jerk is not None):
-            out.append(derivative_points(out[1], knots[..., 2:-2], DEGREE - 2))
+            out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
         return knots, out
 
-    def control_constraints(self, intervals):
-        """Return the control-point constraints g >= 0, (..., rows) for intervals (..., m)."""
-        bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
-        return np.concatenate([_flat(1.0 - _square(p / (MARGIN * limit)))
-                               for p, limit in zip(self.derivatives(intervals)[1], bounds)],
-                              axis=-1)
+    def control_constraints(self, intervals) -> np.ndarray:
+        """Return the control-point constraints g >= 0, velocity then acceleration (, jerk)."""
+        return _control_rows(np.ascontiguousarray(intervals, float), self.points,
+                             self._control_limits, False)[0]
 
     def wafer_constraints(self, intervals: np.ndarray, samples: Samples) -> np.ndarray:
         """Return the wafer constraints g >= 0 at the samples: x, y (, |a|), (c * K,)."""
@@ -148,14 +151,13 @@ class TimingProblem:
 
     def linearise(self, intervals: np.ndarray, samples: Samples, rows=None) -> tuple:
         """Return the constraint values and their exact Jacobian (rows, m) (complex step)."""
-        intervals = np.asarray(intervals, float)
-        control = self.control_constraints(
-            intervals + 1j * COMPLEX_STEP * np.eye(len(intervals)))
+        intervals = np.ascontiguousarray(intervals, float)
+        control, control_jacobian = _control_rows(intervals, self.points,
+                                                  self._control_limits, True)
         if rows is not None:
-            control = control[..., rows]
+            control, control_jacobian = control[rows], control_jacobian[rows]
         values, jacobian = self._wafer(intervals, samples, True)
-        return (np.concatenate([control[0].real, values]),
-                np.vstack([control.imag.T / COMPLEX_STEP, jacobian]))
+        return (np.concatenate([control, values]), np.vstack([control_jacobian, jacobian]))
 
     def _wafer(self, intervals: np.ndarray, samples: Samples, gradients: bool) -> tuple:
         """Return the wafer constraint values (c * K,) and, if asked, their Jacobian."""
@@ -190,24 +192,15 @@ class TimingProblem:
 
         ``wafer_ratio``: the largest ``dense_wafer_ratio`` if the caller already has it.
         """
-        bounds = [self.limits.velocity, self.limits.acceleration, self.limits.jerk]
         ratios = [1.0]
-        for order, (points, limit) in enumerate(zip(self.derivatives(intervals)[1], bounds)):
-            peak = float(np.max(np.abs(points) / (MARGIN * limit), initial=0.0))
+        for order, (points, limit) in enumerate(zip(self.derivatives(intervals)[1],
+                                                    self._control_limits)):
+            peak = float(np.max(np.abs(points) / limit, initial=0.0))
             ratios.append(peak ** (1.0 / (order + 1)))  # speed scales 1/λ, accel 1/λ², ...
         if wafer_ratio is None:
             wafer_ratio = self.dense_wafer_ratio(intervals)[0].max()
         ratios.append(np.sqrt(float(wafer_ratio) / MARGIN))
         return max(ratios)
-
-
-def _square(x):
-    return x * x
-
-
-def _flat(points):
-    """Return control-point values (..., n, d) as (..., n * d)."""
-    return points.reshape(points.shape[:-2] + (-1,))
 
 
 def dense_grid(intervals: np.ndarray, step: float = DENSE_STEP) -> tuple:
@@ -349,3 +342,39 @@ def _wafer_g(ax, ay, limits):
     if limits[2] > 0.0:
         norm = 1.0 - (ax * ax + ay * ay) / (limits[2] * limits[2])
     return (1.0 - (ax / limits[0]) ** 2, 1.0 - (ay / limits[1]) ** 2, norm)
+
+
+@njit(cache=True)
+def _control_rows(intervals, points, limits, gradients):
+    """
+    Return the control-point constraints (R,) and, when ``gradients``, their Jacobian (R, m).
+
+    Rows: every velocity, then acceleration (then jerk) control point's joints, each
+    ``1 - (p / limit)^2``; ``limits`` (orders, 3) hold the margin. The Jacobian column k is
+    the complex step on h_k.
+    """
+    m, orders = len(intervals), len(limits)
+    rows = 0
+    for order in range(orders):
+        rows += 3 * (len(points) - 1 - order)
+    values = np.empty(rows)
+    jacobian = np.zeros((rows, m if gradients else 0))
+    h = np.empty(m, dtype=np.complex128)
+    for k in range(-1, m if gradients else 0):  # k = -1: the values themselves
+        h[:] = intervals
+        if k >= 0:
+            h[k] += 1j * COMPLEX_STEP
+        knots = knots_from_intervals(h)
+        current, row = points + 0j, 0
+        for order in range(orders):
+            current = derivative_points(current, knots[order:len(knots) - order],
+                                        DEGREE - order)
+            for i in range(current.shape[0]):
+                for j in range(3):
+                    g = 1.0 - (current[i, j] / limits[order, j]) ** 2
+                    if k < 0:
+                        values[row] = g.real
+                    else:
+                        jacobian[row, k] = g.imag / COMPLEX_STEP
+                    row += 1
+    return values, jacobian
