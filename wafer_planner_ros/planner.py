@@ -19,7 +19,7 @@ from wafer_planner_ros.corridor import build_corridor, simplify
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.search import find_path
 from wafer_planner_ros.shortcut import shortcut
-from wafer_planner_ros.timing import optimise, Timing, TimingProblem
+from wafer_planner_ros.timing import optimise, scaled_start, Timing, TimingProblem
 from wafer_planner_ros.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
@@ -157,7 +157,7 @@ class Planner:
         begun = time.perf_counter()
         a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
         stage_ms = dict.fromkeys(STAGES, 0.0)
-        candidates, failure = [], None
+        prepared, failure = [], None
         for elbow_a, qa in a.configs:
             for elbow_b, qb in b.configs:
                 if np.array_equal(qa, qb):
@@ -166,28 +166,46 @@ class Planner:
                                         f'{qa.tolist()}')
                 _check_deadline(deadline)
                 try:
-                    candidates.append(self._timed_pair(a, b, qa, qb, (elbow_a, elbow_b),
-                                                       stage_ms))
+                    prepared.append(self._prepared(a, b, qa, qb, (elbow_a, elbow_b),
+                                                   stage_ms))
                 except PlanningError as exc:
                     logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
                     failure = failure or exc
-        # Shortest cycle first; only what is returned needs verifying.
-        for result in sorted(candidates, key=lambda r: r.cycle_time):
+        # Most promising first (the λ-scaled start's cycle time), so that a combination
+        # whose optimisation shows it cannot beat the best so far is given up early.
+        candidates, given_up = [], []
+        for pair in sorted(prepared, key=lambda p: p.start[0].sum()):
             _check_deadline(deadline)
-            try:
-                result = self._verified(result, stage_ms)
-            except PlanningError as exc:
-                logger.warning('%s; trying the next branch combination', exc)
-                failure = failure or exc
-                continue
-            total = (time.perf_counter() - begun) * 1000.0
-            metrics = dict(result.metrics, candidates=len(candidates))
-            return replace(result, metrics=metrics, timings_ms=dict(stage_ms, total=total))
+            best = min((r.cycle_time for r in candidates), default=None)
+            result = self._timed(pair, best, stage_ms)
+            if result is None:
+                logger.debug('branches %s cannot beat %.3f s; given up', pair.branches, best)
+                given_up.append(pair)
+            else:
+                candidates.append(result)
+        while candidates:
+            # Shortest cycle first; only what is returned needs verifying.
+            for result in sorted(candidates, key=lambda r: r.cycle_time):
+                _check_deadline(deadline)
+                try:
+                    result = self._verified(result, stage_ms)
+                except PlanningError as exc:
+                    logger.warning('%s; trying the next branch combination', exc)
+                    failure = failure or exc
+                    continue
+                total = (time.perf_counter() - begun) * 1000.0
+                metrics = dict(result.metrics, candidates=len(prepared),
+                               given_up=len(given_up))
+                return replace(result, metrics=metrics,
+                               timings_ms=dict(stage_ms, total=total))
+            # Every faster one failed verification: optimise those given up after all.
+            candidates = [self._timed(pair, None, stage_ms) for pair in given_up]
+            given_up = []
         raise failure
 
-    def _timed_pair(self, a, b, qa, qb, branches, stage_ms) -> PlanResult:
-        """Return the trajectory between two configurations, not yet verified nor sampled."""
-        cell, model, lipschitz = self.cell, self.cell.clearance_model, self.cell.robot.lipschitz
+    def _prepared(self, a, b, qa, qb, branches, stage_ms) -> '_Prepared':
+        """Return the path, corridor and λ-scaled start between two configurations."""
+        model, lipschitz = self.cell.clearance_model, self.cell.robot.lipschitz
         clock = _Clock(stage_ms)
         found = find_path(self.roadmap, model, lipschitz, qa, qb, clock=clock)
         if found is None:
@@ -202,11 +220,20 @@ class Planner:
                                   per_body=self.settings.per_body_boxes,
                                   extra=self.settings.extra_points)
         clock.lap('corridor')
-        problem = TimingProblem(corridor.control_points, cell.robot)
+        problem = TimingProblem(corridor.control_points, self.cell.robot)
+        start = scaled_start(problem)
         clock.lap('spline')
-        timing = optimise(problem)
-        spline = CubicBSpline.from_intervals(corridor.control_points, timing.intervals)
+        return _Prepared(a, b, qa, qb, branches, roadmap_path, path, corridor.control_points,
+                         problem, start)
+
+    def _timed(self, pair: '_Prepared', give_up_above, stage_ms) -> Optional[PlanResult]:
+        """Return the optimised trajectory, not yet verified; None if it cannot win."""
+        clock = _Clock(stage_ms)
+        timing = optimise(pair.problem, pair.start, give_up_above)
         clock.lap('optimise')
+        if timing is None:
+            return None
+        spline = CubicBSpline.from_intervals(pair.control_points, timing.intervals)
         warnings = () if timing.optimised else (
             f'time optimisation failed ({timing.message}); returning the λ-scaled timing',)
         metrics = {
@@ -217,17 +244,17 @@ class Planner:
             'solver_iterations': timing.iterations,
             'constraint_rounds': timing.rounds,
             'wafer_samples': timing.samples,
-            'roadmap_path_vertices': len(roadmap_path),
-            'path_vertices': len(path),
-            'control_points': len(corridor.control_points),
-            'branches': list(branches),
+            'roadmap_path_vertices': len(pair.roadmap_path),
+            'path_vertices': len(pair.path),
+            'control_points': len(pair.control_points),
+            'branches': list(pair.branches),
         }
         empty = np.empty((0, 3))
         return PlanResult(
-            start=a, goal=b, start_q=qa, goal_q=qb, branches=branches, spline=spline,
-            times=np.empty(0), positions=empty, velocities=empty, accelerations=empty,
-            roadmap_path=roadmap_path, path=path, timing=timing, verification=None,
-            metrics=metrics, warnings=warnings)
+            start=pair.a, goal=pair.b, start_q=pair.qa, goal_q=pair.qb, branches=pair.branches,
+            spline=spline, times=np.empty(0), positions=empty, velocities=empty,
+            accelerations=empty, roadmap_path=pair.roadmap_path, path=pair.path,
+            timing=timing, verification=None, metrics=metrics, warnings=warnings)
 
     def _verified(self, result: PlanResult, stage_ms) -> PlanResult:
         """Return the result verified, sampled and measured; raise VERIFICATION_FAILED."""
@@ -254,6 +281,23 @@ class Planner:
         positions, velocities, accelerations = spline.evaluate_orders(times)
         return replace(result, verification=checked, metrics=metrics, times=times,
                        positions=positions, velocities=velocities, accelerations=accelerations)
+
+
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    """One elbow-branch combination up to its time optimisation."""
+
+    a: Endpoint
+    b: Endpoint
+    qa: np.ndarray
+    qb: np.ndarray
+    branches: Tuple[Optional[int], Optional[int]]
+    roadmap_path: np.ndarray
+    path: np.ndarray
+    control_points: np.ndarray
+    problem: TimingProblem
+    start: tuple
+    """``scaled_start(problem)``: (intervals, λ)."""
 
 
 class _Clock:
