@@ -1,9 +1,9 @@
 """A* over the roadmap (paper section 3): the shortest path in joint-space length."""
 
 from collections import defaultdict
-import heapq
 from typing import Mapping, Optional, Sequence, Tuple
 
+from numba import njit
 import numpy as np
 from scipy.sparse import csr_matrix
 
@@ -19,41 +19,21 @@ def astar(graph: csr_matrix, coords: np.ndarray, start: int, goal: int,
     the heuristic, the straight-line distance to the goal, is consistent for such edges, so
     the first time the goal is taken from the queue its path is optimal. ``extra`` adds
     edges for nodes beyond the matrix (index >= N, e.g. query configurations appended to
-    ``coords``): node -> [(neighbour, length), ...], listed in both directions.
+    ``coords``): node -> [(neighbour, length), ...], listed in both directions. The search
+    itself is compiled (``_astar``); ties in the queue go to the lower node index.
     """
-    extra = extra or {}
-    indptr, indices, weights = graph.indptr, graph.indices, graph.data
-    n_graph = graph.shape[0]
-    heuristic = np.linalg.norm(coords - coords[goal], axis=1)
-    cost = np.full(len(coords), np.inf)
-    parent = np.full(len(coords), -1)
-    closed = np.zeros(len(coords), dtype=bool)
-    cost[start] = 0.0
-    queue = [(heuristic[start], start)]
-    while queue:
-        _, node = heapq.heappop(queue)
-        if closed[node]:
-            continue
-        if node == goal:
-            return _unwind(parent, goal), float(cost[goal])
-        closed[node] = True
-        if node < n_graph:
-            lo, hi = indptr[node], indptr[node + 1]
-            neighbours, lengths = indices[lo:hi], weights[lo:hi]
-        else:
-            neighbours, lengths = np.empty(0, dtype=int), np.empty(0)
-        links = extra.get(node)
-        if links:
-            neighbours = np.concatenate([neighbours, [v for v, _ in links]]).astype(int)
-            lengths = np.concatenate([lengths, [w for _, w in links]])
-        candidate = cost[node] + lengths
-        better = candidate < cost[neighbours]
-        neighbours, candidate = neighbours[better], candidate[better]
-        cost[neighbours] = candidate
-        parent[neighbours] = node
-        for v, f in zip(neighbours.tolist(), (candidate + heuristic[neighbours]).tolist()):
-            heapq.heappush(queue, (f, v))
-    return None
+    links = [(u, v, w) for u, pairs in (extra or {}).items() for v, w in pairs]
+    source = np.array([u for u, _, _ in links], dtype=np.int64)
+    order = np.argsort(source, kind='stable')
+    extra_ptr = np.zeros(len(coords) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(source, minlength=len(coords)), out=extra_ptr[1:])
+    extra_to = np.array([v for _, v, _ in links], dtype=np.int64)[order]
+    extra_w = np.array([w for _, _, w in links], dtype=float)[order]
+    found, parent, length = _astar(graph.indptr.astype(np.int64),
+                                   graph.indices.astype(np.int64), graph.data,
+                                   graph.shape[0], extra_ptr, extra_to, extra_w,
+                                   np.ascontiguousarray(coords, float), start, goal)
+    return (_unwind(parent, goal), float(length)) if found else None
 
 
 def _unwind(parent: np.ndarray, goal: int) -> list:
@@ -61,6 +41,84 @@ def _unwind(parent: np.ndarray, goal: int) -> list:
     while parent[path[-1]] >= 0:
         path.append(int(parent[path[-1]]))
     return path[::-1]
+
+
+@njit(cache=True)
+def _astar(indptr, indices, weights, n_graph, extra_ptr, extra_to, extra_w, coords, start,
+           goal):
+    """Return (found, parent (N,), cost of the goal): A* with a binary heap of (f, node)."""
+    n = len(coords)
+    heuristic = np.empty(n)
+    for i in range(n):
+        heuristic[i] = np.sqrt(np.sum((coords[i] - coords[goal]) ** 2))
+    cost = np.full(n, np.inf)
+    parent = np.full(n, -1, dtype=np.int64)
+    closed = np.zeros(n, dtype=np.bool_)
+    capacity = len(indices) + len(extra_to) + 1
+    keys, nodes = np.empty(capacity), np.empty(capacity, dtype=np.int64)
+    cost[start] = 0.0
+    keys[0], nodes[0], size = heuristic[start], start, 1
+    while size > 0:
+        node = nodes[0]
+        size -= 1
+        keys[0], nodes[0] = keys[size], nodes[size]
+        _sift_down(keys, nodes, size)
+        if closed[node]:
+            continue
+        if node == goal:
+            return True, parent, cost[goal]
+        closed[node] = True
+        if node < n_graph:
+            size = _relax(node, indptr[node], indptr[node + 1], indices, weights, cost,
+                          parent, heuristic, keys, nodes, size)
+        size = _relax(node, extra_ptr[node], extra_ptr[node + 1], extra_to, extra_w, cost,
+                      parent, heuristic, keys, nodes, size)
+    return False, parent, np.inf
+
+
+@njit(cache=True)
+def _relax(node, lo, hi, to, weights, cost, parent, heuristic, keys, nodes, size):
+    """Relax the edges node -> to[lo:hi]; push what improved; return the heap size."""
+    for e in range(lo, hi):
+        v, candidate = to[e], cost[node] + weights[e]
+        if candidate < cost[v]:
+            cost[v], parent[v] = candidate, node
+            keys[size], nodes[size] = candidate + heuristic[v], v
+            _sift_up(keys, nodes, size)
+            size += 1
+    return size
+
+
+@njit(cache=True)
+def _before(keys, nodes, a, b):
+    return keys[a] < keys[b] or (keys[a] == keys[b] and nodes[a] < nodes[b])
+
+
+@njit(cache=True)
+def _sift_up(keys, nodes, i):
+    while i > 0:
+        up = (i - 1) // 2
+        if not _before(keys, nodes, i, up):
+            break
+        keys[i], keys[up] = keys[up], keys[i]
+        nodes[i], nodes[up] = nodes[up], nodes[i]
+        i = up
+
+
+@njit(cache=True)
+def _sift_down(keys, nodes, size):
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and _before(keys, nodes, child + 1, child):
+            child += 1
+        if not _before(keys, nodes, child, i):
+            break
+        keys[i], keys[child] = keys[child], keys[i]
+        nodes[i], nodes[child] = nodes[child], nodes[i]
+        i = child
 
 
 def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np.ndarray,
