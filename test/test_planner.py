@@ -1,5 +1,7 @@
 """The planner end to end, checked independently, and every error a user can provoke."""
 
+from dataclasses import replace
+
 from independent import check
 import numpy as np
 import pytest
@@ -78,6 +80,18 @@ def test_result_carries_samples_metrics_and_stage_timings(default_cell, default_
                 'min_clearance', 'limit_ratios', 'peak_jerk', 'solver_iterations'):
         assert key in result.metrics
     assert max(result.metrics['limit_ratios'].values()) <= 1.0
+
+
+def test_a_jerk_limit_is_met_everywhere(default_cell, default_roadmap):
+    robot = default_cell.robot
+    jerk = np.array([84.0, 168.0, 126.0])  # the commented values of efem_default.yaml
+    cell = replace(default_cell, robot=replace(robot, limits=replace(robot.limits, jerk=jerk)))
+    free = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
+    limited = Planner(cell, default_roadmap).plan('loadport2', 'loadlock2')
+    assert np.any(np.array(free.metrics['peak_jerk']) > jerk)  # would break the limit
+    assert limited.metrics['limit_ratios']['jerk'] <= 1.0
+    assert np.all(np.array(limited.metrics['peak_jerk']) <= jerk)
+    assert limited.cycle_time > free.cycle_time
 
 
 def test_the_papers_pipeline_stays_selectable(default_cell, default_roadmap):

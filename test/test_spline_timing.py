@@ -1,5 +1,7 @@
 """B-spline evaluation and derivatives, the corridor's proof, and the time optimisation."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.interpolate import BSpline
@@ -105,6 +107,15 @@ def _on_segment(points, a, b):
 def test_constraint_gradients_are_exact(default_cell, default_roadmap):
     corridor = _station_corridor(default_cell, default_roadmap, 'loadport2', 'loadlock1')
     problem = TimingProblem(corridor.control_points, default_cell.robot)
+    _check_gradients(problem, corridor, default_cell)
+    # Every kind of row: jerk control points and the |a| limit too.
+    robot = default_cell.robot
+    limited = replace(robot, limits=replace(robot.limits, jerk=np.array([84.0, 168.0, 126.0])),
+                      wafer_acceleration_norm_limit=3.0)
+    _check_gradients(TimingProblem(corridor.control_points, limited), corridor, default_cell)
+
+
+def _check_gradients(problem, corridor, default_cell):
     rng = np.random.default_rng(73)
     h = rng.uniform(0.05, 0.3, problem.spans)
     # Samples in every span, including the first and last three (clamped knots).
@@ -123,8 +134,10 @@ def test_constraint_gradients_are_exact(default_cell, default_roadmap):
     t = spline.knots[span + 3] + h[span] * samples.fraction
     ax, ay = default_cell.robot.arm.wafer_acceleration(*spline.evaluate_orders(t)).T
     wafer = default_cell.robot.wafer_acceleration_limit
-    expected = np.concatenate([1 - (ax / (MARGIN * wafer[0])) ** 2,
-                               1 - (ay / (MARGIN * wafer[1])) ** 2])
+    expected = [1 - (ax / (MARGIN * wafer[0])) ** 2, 1 - (ay / (MARGIN * wafer[1])) ** 2]
+    if problem.wafer_norm is not None:
+        expected.append(1 - (ax ** 2 + ay ** 2) / (MARGIN * problem.wafer_norm) ** 2)
+    expected = np.concatenate(expected)
     assert np.allclose(problem.wafer_constraints(h, samples), expected, rtol=1e-9, atol=1e-9)
 
 

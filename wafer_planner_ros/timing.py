@@ -373,8 +373,9 @@ def _control_rows(intervals, points, limits, gradients):
     Return the control-point constraints (R,) and, when ``gradients``, their Jacobian (R, m).
 
     Rows: every velocity, then acceleration (then jerk) control point's joints, each
-    ``1 - (p / limit)^2``; ``limits`` (orders, 3) hold the margin. The Jacobian column k is
-    the complex step on h_k.
+    ``1 - (p / limit)^2``; ``limits`` (orders, 3) hold the margin. Eq. 6-7 differentiated:
+    D'_i = d (D_{i+1} - D_i) / w_i with w_i = h_{i+o-2} + ... + h_i for the o-th derivative
+    points D (degree d = 3 - o), so dD'_i/dh_k = (d (dD_{i+1} - dD_i) - D'_i [k in w_i]) / w_i.
     """
     m, orders = len(intervals), len(limits)
     rows = 0
@@ -382,22 +383,35 @@ def _control_rows(intervals, points, limits, gradients):
         rows += 3 * (len(points) - 1 - order)
     values = np.empty(rows)
     jacobian = np.zeros((rows, m if gradients else 0))
-    h = np.empty(m, dtype=np.complex128)
-    for k in range(-1, m if gradients else 0):  # k = -1: the values themselves
-        h[:] = intervals
-        if k >= 0:
-            h[k] += 1j * COMPLEX_STEP
-        knots = knots_from_intervals(h)
-        current, row = points + 0j, 0
-        for order in range(orders):
-            current = derivative_points(current, knots[order:len(knots) - order],
-                                        DEGREE - order)
-            for i in range(current.shape[0]):
-                for j in range(3):
-                    g = 1.0 - (current[i, j] / limits[order, j]) ** 2
-                    if k < 0:
-                        values[row] = g.real
-                    else:
-                        jacobian[row, k] = g.imag / COMPLEX_STEP
-                    row += 1
+    knots = knots_from_intervals(intervals)
+    current = points.copy()
+    slope = np.zeros((len(points), 3, m))  # d(current)/dh
+    row = 0
+    for order in range(orders):
+        degree = DEGREE - order
+        n = len(current) - 1
+        following = np.empty((n, 3))
+        following_slope = np.zeros((n, 3, m))
+        for i in range(n):
+            width = knots[i + 4] - knots[i + 1 + order]
+            for j in range(3):
+                following[i, j] = degree * (current[i + 1, j] - current[i, j]) / width
+            if gradients:
+                for k in range(m):
+                    inside = i + order - 2 <= k <= i
+                    for j in range(3):
+                        d = degree * (slope[i + 1, j, k] - slope[i, j, k])
+                        if inside:
+                            d -= following[i, j]
+                        following_slope[i, j, k] = d / width
+        for i in range(n):
+            for j in range(3):
+                ratio = following[i, j] / limits[order, j]
+                values[row] = 1.0 - ratio * ratio
+                if gradients:
+                    for k in range(m):
+                        jacobian[row, k] = -2.0 * ratio * following_slope[i, j, k] \
+                            / limits[order, j]
+                row += 1
+        current, slope = following, following_slope
     return values, jacobian
