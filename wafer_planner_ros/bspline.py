@@ -112,6 +112,25 @@ def states(control_points: np.ndarray, intervals: np.ndarray, span, fraction) ->
                         np.asarray(fraction, float))
 
 
+_FALLING = np.array([[factorial(j) / factorial(j - order) if j >= order else 0.0
+                      for order in range(DEGREE + 1)] for j in range(DEGREE + 1)])
+"""j! / (j - order)!: the factor of tau^(j - order) in the order-th derivative."""
+
+
+@njit(cache=True)
+def _horner(coefficients, starts, span, t, order):
+    """Return the order-th derivative (N, 3) of the Taylor pieces at times t in ``span``."""
+    out = np.empty((len(t), coefficients.shape[2]))
+    for k in range(len(t)):
+        s, tau = span[k], t[k] - starts[span[k]]
+        for i in range(coefficients.shape[2]):
+            value = coefficients[s, DEGREE, i] * _FALLING[DEGREE, order]
+            for j in range(DEGREE - 1, order - 1, -1):
+                value = value * tau + coefficients[s, j, i] * _FALLING[j, order]
+            out[k, i] = value
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class CubicBSpline:
     """A clamped cubic B-spline q(t) in joint space."""
@@ -163,13 +182,9 @@ class CubicBSpline:
         t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
         starts, coefficients = self._pieces
         span = np.clip(np.searchsorted(starts, t, side='right') - 1, 0, len(starts) - 1)
-        tau = (t - starts[span])[:, None]
-        pieces = coefficients[span]
         out = []
         for order in orders:
-            values = pieces[:, DEGREE] * (factorial(DEGREE) / factorial(DEGREE - order))
-            for j in range(DEGREE - 1, order - 1, -1):
-                values = values * tau + pieces[:, j] * (factorial(j) / factorial(j - order))
+            values = _horner(coefficients, starts, span, t, order)
             if order == 0:
                 # A clamped curve passes through its end points; make that exact.
                 values[t <= 0.0] = self.control_points[0]
