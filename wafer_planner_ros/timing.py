@@ -21,7 +21,8 @@ function of h (the B-spline recursion and the kinematics use plain arithmetic), 
 ``Im g(h + i ε e_k) / ε`` is dg/dh_k to machine precision — there is no difference to cancel,
 unlike finite differences. A wafer sample in span s depends on h_{s-2}..h_{s+2} only, so
 its row of the Jacobian takes five complex evaluations of its own spline window (compiled,
-``_wafer_rows``); the control-point rows take one vectorised evaluation on ``h + i ε I``.
+``_wafer_rows``); the control-point rows are Eq. 6-7 differentiated in closed form
+(``_control_rows``).
 
 **Beyond the paper**: sampling the wafer acceleration at the knots lets it exceed the limit
 between them. Every answer of the solver is therefore checked densely (every ``DENSE_STEP``
