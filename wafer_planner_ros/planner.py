@@ -4,8 +4,9 @@ The planning pipeline: request -> roadmap path -> corridor -> spline -> timing -
 ``Planner.plan(start, goal)`` takes a station name or three joint angles for each end. When
 a station allows both elbow branches every combination is planned and the one with the
 shortest cycle time is returned (SPEC section 3); a combination whose optimisation shows it
-cannot win is given up part-way (``timing.optimise``'s ``give_up_above``). Every returned trajectory has passed
-``verify``; a request that cannot be answered raises ``PlanningError`` with its code.
+cannot win is given up part-way (``timing.optimise``'s ``give_up_above``). Every returned
+trajectory has passed ``verify``; a request that cannot be answered raises
+``PlanningError`` with its code.
 """
 
 from dataclasses import dataclass, field, replace
