@@ -193,7 +193,7 @@ def _link(extra, pending, coords, a: int, b: int) -> None:
 
 
 def _certify(model, lipschitz, coords, clearance, extra, pending, edges) -> set:
-    """Certify edges; drop those that fail from ``extra``; return the nodes of query ends."""
+    """Certify edges; drop those that fail from ``extra``; return their query-end nodes."""
     a, b = np.array(edges).T
     ok, _ = certify_segments(model, lipschitz, coords[a], coords[b], clearance[a],
                              clearance[b])

@@ -156,7 +156,7 @@ class TimingProblem:
                                self.wafer_constraints(intervals, samples)])
 
     def linearise(self, intervals: np.ndarray, samples: Samples, rows=None) -> tuple:
-        """Return the constraint values and their exact Jacobian (rows, m) (complex step)."""
+        """Return the constraint values and their exact Jacobian (rows, m)."""
         intervals = np.ascontiguousarray(intervals, float)
         control, control_jacobian = _control_rows(intervals, self.points,
                                                   self._control_limits, True)
