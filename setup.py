@@ -14,6 +14,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
     extras_require={'test': ['pytest', 'hypothesis']},
@@ -26,6 +27,8 @@ setup(
         'console_scripts': [
             'wafer-roadmap = wafer_planner_ros.cli.roadmap:entry_point',
             'wafer-plan = wafer_planner_ros.cli.plan:entry_point',
+            'wafer-plan-client = wafer_planner_ros.node.client:entry_point',
+            'wafer_planner_node = wafer_planner_ros.node.planner_node:entry_point',
         ],
     },
 )

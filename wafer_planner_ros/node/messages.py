@@ -1,0 +1,80 @@
+"""Messages the node publishes, built from the core's results (SPEC section 5)."""
+
+import json
+from typing import Mapping, Optional, Sequence
+
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+import numpy as np
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
+          'error': DiagnosticStatus.ERROR}
+
+
+def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> JointTrajectory:
+    """Return the plan's samples as a JointTrajectory (``header.frame_id`` = request id)."""
+    nanoseconds = np.round(result.times * 1e9).astype(np.int64)
+    seconds, nanos = np.divmod(nanoseconds, 1_000_000_000)
+    points = [JointTrajectoryPoint(positions=q, velocities=qd, accelerations=qdd,
+                                   time_from_start=Duration(sec=s, nanosec=n))
+              for q, qd, qdd, s, n in zip(result.positions, result.velocities,
+                                          result.accelerations, seconds.tolist(),
+                                          nanos.tolist())]
+    return JointTrajectory(header=Header(stamp=stamp, frame_id=request_id),
+                           joint_names=list(joint_names), points=points)
+
+
+def result_status(request_id: str, level: str, message: str,
+                  values: Mapping[str, object]) -> DiagnosticStatus:
+    """Return the ``~/result`` status: name = request id, values as strings."""
+    return DiagnosticStatus(level=LEVELS[level], name=request_id, message=message,
+                            hardware_id='wafer_planner',
+                            values=[KeyValue(key=k, value=_text(v)) for k, v in values.items()])
+
+
+def plan_values(result, roadmap, start, goal) -> dict:
+    """Return the values of a successful result (SPEC section 5)."""
+    values = {'code': 'OK', 'cycle_time': result.cycle_time,
+              'initial_cycle_time': result.initial_cycle_time,
+              'planning_time_ms': result.timings_ms['total']}
+    values.update({f'{stage}_ms': ms for stage, ms in result.timings_ms.items()
+                   if stage != 'total'})
+    values.update(_ends(roadmap, start, goal))
+    values.update({f'ratio_{name}': ratio
+                   for name, ratio in result.metrics['limit_ratios'].items()})
+    values['min_clearance'] = result.metrics['min_clearance']
+    values['branches'] = result.branches
+    return values
+
+
+def error_values(code: str, roadmap, start, goal, planning_ms: Optional[float]) -> dict:
+    """Return the values of a failed request."""
+    values = {'code': code}
+    if planning_ms is not None:
+        values['planning_time_ms'] = planning_ms
+    values.update(_ends(roadmap, start, goal))
+    return values
+
+
+def _ends(roadmap, start, goal) -> dict:
+    return {'roadmap_hash': roadmap.digest if roadmap is not None else '',
+            'seed': roadmap.seed if roadmap is not None else '',
+            'from': _label(start), 'to': _label(goal)}
+
+
+def _label(end) -> str:
+    if end is None:
+        return ''
+    if isinstance(end, str):
+        return end
+    return json.dumps(np.asarray(end, float).reshape(-1).tolist())
+
+
+def _text(value) -> str:
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, (list, tuple)):
+        return json.dumps(list(value))
+    return str(value)

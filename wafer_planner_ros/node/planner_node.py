@@ -1,0 +1,408 @@
+"""
+The planning node ``wafer_planner`` (SPEC section 5): a thin ROS edge around the core.
+
+Threads: the executor's (subscriptions, services, the diagnostics timer, publishing) and
+one worker that loads or rebuilds the roadmap and plans, one request at a time. Requests
+are read and checked in the subscription callback, then wait in a bounded backlog
+(``planning.max_queue``; beyond it the answer is ``BUSY``). While the roadmap loads or is
+rebuilt new requests are answered ``ROADMAP_NOT_READY``; a request still waiting
+``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The worker hands
+every answer back to the executor through a guard condition, so all publishing happens on
+the executor; each request gets exactly one ``~/result``, whatever happens.
+"""
+
+from collections import deque
+import json
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, Trigger
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from wafer_planner_ros.cache import load_or_build
+from wafer_planner_ros.cell import Cell
+from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
+from wafer_planner_ros.node import markers, messages
+from wafer_planner_ros.node.requests import joint_request, RequestError, station_request
+from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.roadmap import RoadmapSettings
+
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class WaferPlannerNode(Node):
+    """Plans wafer transfers on request; see the module's description."""
+
+    def __init__(self, **kwargs):
+        """Declare and check the parameters, set up the interfaces, start the worker."""
+        super().__init__('wafer_planner', **kwargs)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        self.settings = settings_from(
+            {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS})
+        self._lock = threading.Condition()
+        self._backlog = deque()
+        self._outbox = deque()
+        self._planner = None
+        self._cell = None
+        self._cached = None
+        self._busy_with = None
+        self._load_failed = False
+        self._counts = {'served': 0, 'failed': 0}
+        self._last_error = ''
+        self._stopping = False
+        requests = MutuallyExclusiveCallbackGroup()
+        self._status_group = ReentrantCallbackGroup()
+        self._rebuild_group = MutuallyExclusiveCallbackGroup()
+        self._trajectory_pub = self.create_publisher(JointTrajectory, '~/trajectory', RELIABLE)
+        self._result_pub = self.create_publisher(DiagnosticStatus, '~/result', RELIABLE)
+        self._roadmap_pub = self.create_publisher(MarkerArray, '~/roadmap_markers', LATCHED)
+        self._path_pub = self.create_publisher(MarkerArray, '~/path_markers', RELIABLE)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(JointTrajectory, '~/plan_request', self._on_joint_request,
+                                 RELIABLE, callback_group=requests)
+        self.create_subscription(String, '~/plan_station_request', self._on_station_request,
+                                 RELIABLE, callback_group=requests)
+        self.create_service(Trigger, '~/get_status', self._on_get_status,
+                            callback_group=self._status_group)
+        self.create_service(Trigger, '~/rebuild_roadmap', self._on_rebuild,
+                            callback_group=self._rebuild_group)
+        self.create_service(SetBool, '~/set_recording', self._on_set_recording,
+                            callback_group=self._status_group)
+        self._deliver = self.create_guard_condition(self._on_deliver,
+                                                    callback_group=self._status_group)
+        self.create_timer(1.0, self._publish_health, callback_group=self._status_group)
+        self._worker = threading.Thread(target=self._work, name='wafer_planner_worker',
+                                        daemon=True)
+        self._backlog.append(('load', None))
+        self._worker.start()
+
+    # ----------------------------------------------------------------- requests in
+
+    def _on_joint_request(self, msg: JointTrajectory) -> None:
+        received = time.monotonic()
+        try:
+            request = joint_request(msg.header.frame_id, msg.joint_names,
+                                    [p.positions for p in msg.points],
+                                    self._robot_joints())
+        except RequestError as exc:
+            self._answer_error(exc.request_id, exc.code, exc.message, None, None)
+            return
+        self._enqueue(request, received)
+
+    def _on_station_request(self, msg: String) -> None:
+        received = time.monotonic()
+        try:
+            request = station_request(msg.data)
+        except RequestError as exc:
+            self._answer_error(exc.request_id, exc.code, exc.message, None, None)
+            return
+        self._enqueue(request, received)
+
+    def _robot_joints(self):
+        cell = self._cell
+        return cell.robot.joint_names if cell is not None else ('joint_1', 'joint_2', 'joint_3')
+
+    def _enqueue(self, request, received: float) -> None:
+        with self._lock:
+            if self._planner is None:
+                reason = self._last_error if self._load_failed else \
+                    'the roadmap is being loaded or built'
+                code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {reason}'
+            elif sum(1 for kind, _ in self._backlog if kind == 'plan') \
+                    >= self.settings.max_queue:
+                code = ErrorCode.BUSY
+                message = (f'busy: {self.settings.max_queue} requests are already waiting '
+                           '(planning.max_queue)')
+            else:
+                self._backlog.append(('plan', (request, received)))
+                self._lock.notify()
+                return
+        self._answer_error(request.request_id, code, message, request.start, request.goal)
+
+    # ----------------------------------------------------------------- the worker
+
+    def _work(self) -> None:
+        while True:
+            with self._lock:
+                while not self._backlog and not self._stopping:
+                    self._lock.wait()
+                if self._stopping:
+                    return
+                kind, item = self._backlog.popleft()
+                self._busy_with = kind
+            try:
+                if kind == 'plan':
+                    self._plan(*item)
+                else:
+                    self._load(item)
+            finally:
+                with self._lock:
+                    self._busy_with = None
+
+    def _load(self, done) -> None:
+        """Load or build the roadmap for the current parameters; set ``done`` when over."""
+        with self._lock:
+            self._planner = None
+            settings = self.settings
+        started = time.monotonic()
+        try:
+            cell = Cell.from_yaml(settings.cell_file)
+            self._cell = cell
+            self.get_logger().info(f'cell {cell.name} from {settings.cell_file}; loading or '
+                                   f'building a roadmap of {settings.nodes} nodes')
+            cached = load_or_build(cell, RoadmapSettings(nodes=settings.nodes), settings.seed,
+                                   settings.cache_dir, self._progress())
+            planner = Planner(cell, cached.roadmap,
+                              PlannerSettings(sample_period=settings.sample_period))
+            _warm_up(planner)
+        except (WaferPlannerError, ValueError, OSError) as exc:
+            self._last_error = f'roadmap not loaded: {exc}'
+            self.get_logger().error(self._last_error)
+            with self._lock:
+                self._cached, self._load_failed = None, True
+            if done is not None:
+                done.set()
+            return
+        roadmap = cached.roadmap
+        with self._lock:
+            self._cached, self._planner, self._load_failed = cached, planner, False
+        self._send(('markers', markers.roadmap_markers(cell, roadmap, settings.frame_id,
+                                                       self.get_clock().now().to_msg())))
+        self.get_logger().info(
+            f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
+            f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
+            f'(ready {time.monotonic() - started:.2f} s after loading began)')
+        if done is not None:
+            done.set()
+
+    def _progress(self):
+        logger, last = self.get_logger(), [-1]
+
+        def report(done: int, total: int, edges: int) -> None:
+            tenth = 10 * done // max(total, 1)
+            if tenth != last[0]:
+                last[0] = tenth
+                logger.info(f'building roadmap: {done}/{total} nodes, {edges} edges')
+        return report
+
+    def _plan(self, request, received: float) -> None:
+        with self._lock:
+            planner, cached, settings = self._planner, self._cached, self.settings
+        roadmap = cached.roadmap if cached is not None else None
+        if planner is None:
+            self._answer_error(request.request_id, ErrorCode.ROADMAP_NOT_READY,
+                               'not ready: the roadmap is being rebuilt', request.start,
+                               request.goal)
+            return
+        if planner.settings.sample_period != settings.sample_period:
+            planner = Planner(planner.cell, planner.roadmap,
+                              PlannerSettings(sample_period=settings.sample_period))
+        begun = time.monotonic()
+        try:
+            result = planner.plan(request.start, request.goal,
+                                  deadline=received + settings.timeout)
+        except PlanningError as exc:
+            self._answer_error(request.request_id, exc.code, exc.message, request.start,
+                               request.goal, (time.monotonic() - begun) * 1000.0, roadmap)
+            return
+        except Exception as exc:  # noqa: B902 - every request gets its one answer
+            self.get_logger().error(f'request {request.request_id}: internal error {exc!r}')
+            self._answer_error(request.request_id, ErrorCode.INTERNAL, f'internal error: {exc!r}',
+                               request.start, request.goal,
+                               (time.monotonic() - begun) * 1000.0, roadmap)
+            return
+        stamp = self.get_clock().now().to_msg()
+        level = 'warn' if result.warnings else 'ok'
+        message = '; '.join(result.warnings) or (
+            f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
+        self._send(('trajectory', messages.trajectory(result, request.request_id,
+                                                      planner.cell.robot.joint_names, stamp)),
+                   ('result', messages.result_status(
+                       request.request_id, level, message,
+                       messages.plan_values(result, roadmap, request.start, request.goal))),
+                   ('path', markers.path_markers(planner.cell, result, settings.frame_id,
+                                                 stamp)))
+        with self._lock:
+            self._counts['served'] += 1
+
+    # ----------------------------------------------------------------- answers out
+
+    def _answer_error(self, request_id, code, message, start, goal, planning_ms=None,
+                      roadmap=None) -> None:
+        if roadmap is None and self._cached is not None:
+            roadmap = self._cached.roadmap
+        self.get_logger().warning(f'request {request_id or "(no id)"}: {code.value}: {message}')
+        status = messages.result_status(
+            request_id, 'error', f'{code.value}: {message}',
+            messages.error_values(code.value, roadmap, start, goal, planning_ms))
+        with self._lock:
+            self._counts['failed'] += 1
+            self._last_error = f'{request_id}: {code.value}: {message}'
+        self._send(('result', status))
+
+    def _send(self, *items) -> None:
+        """Hand messages to the executor (publishing happens in ``_on_deliver``)."""
+        with self._lock:
+            self._outbox.extend(items)
+        self._deliver.trigger()
+
+    def _on_deliver(self) -> None:
+        publishers = {'trajectory': self._trajectory_pub, 'result': self._result_pub,
+                      'markers': self._roadmap_pub, 'path': self._path_pub}
+        while True:
+            with self._lock:
+                if not self._outbox:
+                    return
+                kind, msg = self._outbox.popleft()
+            publishers[kind].publish(msg)
+
+    # ----------------------------------------------------------------- services, health
+
+    def status(self) -> dict:
+        """Return the node's state (``~/get_status``)."""
+        with self._lock:
+            roadmap = self._cached.roadmap if self._cached is not None else None
+            return {
+                'ready': self._planner is not None,
+                'busy_with': self._busy_with,
+                'cell': self._cell.name if self._cell is not None else None,
+                'nodes': roadmap.node_count if roadmap is not None else 0,
+                'edges': roadmap.edge_count if roadmap is not None else 0,
+                'hash': roadmap.digest if roadmap is not None else '',
+                'seed': roadmap.seed if roadmap is not None else self.settings.seed,
+                'queue': sum(1 for kind, _ in self._backlog if kind == 'plan'),
+                'served': self._counts['served'], 'failed': self._counts['failed'],
+                'last_error': self._last_error,
+                'recording': False,
+            }
+
+    def _on_get_status(self, request, response):
+        response.success = True
+        response.message = json.dumps(self.status())
+        return response
+
+    def _on_rebuild(self, request, response):
+        done = threading.Event()
+        with self._lock:
+            self._planner = None
+            self._busy_with = 'rebuild'
+            self._backlog.append(('load', done))
+            self._lock.notify()
+        done.wait()
+        status = self.status()
+        response.success = status['ready']
+        response.message = (f'rebuilt: {status["nodes"]} nodes, {status["edges"]} edges, hash '
+                            f'{status["hash"][:12]}' if status['ready'] else self._last_error)
+        return response
+
+    def _on_set_recording(self, request, response):
+        response.success = False
+        response.message = 'recording is not available in this version'
+        return response
+
+    def _publish_health(self) -> None:
+        status = self.status()
+        level = DiagnosticStatus.OK if status['ready'] else DiagnosticStatus.WARN
+        if not status['ready'] and status['busy_with'] is None:
+            level = DiagnosticStatus.ERROR
+        message = 'ready' if status['ready'] else (
+            'loading the roadmap' if status['busy_with'] else status['last_error'])
+        keys = ('ready', 'nodes', 'edges', 'queue', 'served', 'failed', 'recording')
+        health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
+                                  message=message, hardware_id='wafer_planner',
+                                  values=[KeyValue(key=k, value=str(status[k])) for k in keys])
+        array = DiagnosticArray(status=[health])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics_pub.publish(array)
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        try:
+            for parameter in parameters:
+                check(parameter.name, parameter.value)
+            changed = {p.name: p.value for p in parameters}
+            current = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS
+                       if self.has_parameter(spec.name) and spec.name not in changed}
+            settings = settings_from({**current, **changed})
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if hasattr(self, '_lock'):
+            with self._lock:
+                self.settings = settings
+        return SetParametersResult(successful=True)
+
+    def destroy_node(self) -> None:
+        """Stop the worker (after the request it is planning), then destroy the node."""
+        with self._lock:
+            self._stopping = True
+            self._lock.notify_all()
+        self._worker.join(timeout=30.0)
+        super().destroy_node()
+
+
+def _warm_up(planner) -> None:
+    """Plan once so that the compiled kernels are loaded before the first request."""
+    names = sorted(planner.cell.stations)
+    try:
+        planner.plan(names[0], names[-1])
+    except (PlanningError, IndexError):
+        pass  # a cell whose first and last stations cannot be joined still warms up
+
+
+def _descriptor(spec) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(description=spec.description)
+    if spec.low is not None and isinstance(spec.default, int):
+        descriptor.integer_range = [IntegerRange(from_value=int(spec.low),
+                                                 to_value=int(spec.high), step=0)]
+    elif spec.low is not None:
+        descriptor.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
+                                                              to_value=float(spec.high),
+                                                              step=0.0)]
+    return descriptor
+
+
+def main(args=None) -> int:
+    """Run the node until interrupted (Ctrl-C or SIGTERM)."""
+    rclpy.init(args=args)
+    node, executor, code = None, None, 0
+    try:
+        node = WaferPlannerNode()
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as exc:
+        print(f'wafer_planner: bad parameter: {exc}', flush=True)
+        code = 2
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+def entry_point() -> None:
+    """Console script ``wafer_planner_node``."""
+    raise SystemExit(main())
+
+
+if __name__ == '__main__':
+    entry_point()

@@ -1,0 +1,102 @@
+"""
+The node's parameters (SPEC section 5): names, defaults, ranges, meaning, and validation.
+
+ROS-free: the node declares its parameters from ``PARAMETERS`` and turns their values into
+one frozen ``NodeSettings`` with ``settings_from``; a bad value raises ``ValueError`` naming
+the parameter, both at start-up and when a parameter is set at run time.
+"""
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Any, Mapping, NamedTuple, Optional, Tuple
+
+from wafer_planner_ros.cache import DEFAULT_CACHE_DIR
+from wafer_planner_ros.cell import default_cell_path
+
+
+class Parameter(NamedTuple):
+    """One declared parameter."""
+
+    name: str
+    default: Any
+    description: str
+    low: Optional[float] = None
+    high: Optional[float] = None
+
+
+PARAMETERS: Tuple[Parameter, ...] = (
+    Parameter('cell_file', '',
+              'cell YAML file (SPEC section 2); empty: the packaged config/efem_default.yaml'),
+    Parameter('roadmap.nodes', 1500, 'sampled roadmap nodes', 10, 200000),
+    Parameter('roadmap.seed', 0, 'roadmap random seed', 0, 2 ** 31 - 1),
+    Parameter('roadmap.cache_dir', str(DEFAULT_CACHE_DIR),
+              'roadmap cache directory; empty disables the cache'),
+    Parameter('trajectory.sample_period', 0.01,
+              'seconds between the published trajectory points (the end is added)', 0.001, 1.0),
+    Parameter('planning.timeout', 2.0,
+              'seconds from receipt after which a request is answered TIMEOUT', 0.01, 600.0),
+    Parameter('planning.max_queue', 32,
+              'requests waiting to be planned; more are answered BUSY', 1, 10000),
+    Parameter('recording.enabled', True, 'record every query to MCAP'),
+    Parameter('recording.directory', '~/.ros/wafer_planner/recordings',
+              'where the recordings are written'),
+    Parameter('markers.frame_id', 'efem', 'frame of the published markers'),
+)
+
+_BY_NAME = {p.name: p for p in PARAMETERS}
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """Validated parameter values."""
+
+    cell_file: Path
+    nodes: int
+    seed: int
+    cache_dir: Optional[Path]
+    """None: the cache is disabled."""
+    sample_period: float
+    timeout: float
+    max_queue: int
+    recording_enabled: bool
+    recording_directory: Path
+    frame_id: str
+
+
+def check(name: str, value) -> None:
+    """Raise ValueError naming ``name`` when ``value`` is unusable for it."""
+    spec = _BY_NAME.get(name)
+    if spec is None:
+        raise ValueError(f'{name} is not a parameter of this node')
+    expected = type(spec.default)
+    if expected is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if type(value) is not expected:
+        raise ValueError(f'{name} must be a {expected.__name__}, got {value!r}')
+    if expected is float and not math.isfinite(value):
+        raise ValueError(f'{name} must be finite, got {value!r}')
+    if spec.low is not None and not spec.low <= value <= spec.high:
+        raise ValueError(f'{name} must be in [{spec.low}, {spec.high}], got {value!r}')
+    if name in ('markers.frame_id', 'recording.directory') and not value.strip():
+        raise ValueError(f'{name} must not be empty')
+
+
+def settings_from(values: Mapping[str, Any]) -> NodeSettings:
+    """Return the settings for parameter values (missing ones take their defaults)."""
+    merged = {p.name: p.default for p in PARAMETERS}
+    merged.update(values)
+    for name, value in merged.items():
+        check(name, value)
+    cache = merged['roadmap.cache_dir'].strip()
+    return NodeSettings(
+        cell_file=Path(merged['cell_file']).expanduser() if merged['cell_file'].strip()
+        else default_cell_path(),
+        nodes=merged['roadmap.nodes'], seed=merged['roadmap.seed'],
+        cache_dir=Path(cache).expanduser() if cache else None,
+        sample_period=float(merged['trajectory.sample_period']),
+        timeout=float(merged['planning.timeout']),
+        max_queue=merged['planning.max_queue'],
+        recording_enabled=merged['recording.enabled'],
+        recording_directory=Path(merged['recording.directory']).expanduser(),
+        frame_id=merged['markers.frame_id'])
