@@ -26,8 +26,8 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml
 	@touch $(STAMP)
 
 run: $(STAMP)
-	$(ENV) $(PY) -m wafer_planner_ros.cli.roadmap $(RUN_ARGS)
-	$(ENV) $(PY) -m wafer_planner_ros.cli.plan --all-pairs $(RUN_ARGS)
+	$(ENV) $(PY) -m wafer_planner_ros.node.planner_node --ros-args \
+		--params-file config/wafer_planner.yaml $(RUN_ARGS)
 
 test: $(STAMP)
 	$(COLCON) build $(COLCON_PATHS)
@@ -39,6 +39,7 @@ bench: $(STAMP)
 	$(PY) -m pip install --disable-pip-version-check -q -r bench/requirements.txt
 	$(ENV) $(PY) bench/bench_roadmap.py
 	$(ENV) $(PY) bench/bench_plan.py
+	$(ENV) $(PY) bench/bench_node.py
 
 clean:
 	rm -rf .colcon

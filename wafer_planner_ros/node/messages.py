@@ -19,8 +19,9 @@ def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> Jo
     seconds, nanos = np.divmod(nanoseconds, 1_000_000_000)
     points = [JointTrajectoryPoint(positions=q, velocities=qd, accelerations=qdd,
                                    time_from_start=Duration(sec=s, nanosec=n))
-              for q, qd, qdd, s, n in zip(result.positions, result.velocities,
-                                          result.accelerations, seconds.tolist(),
+              for q, qd, qdd, s, n in zip(result.positions.tolist(),
+                                          result.velocities.tolist(),
+                                          result.accelerations.tolist(), seconds.tolist(),
                                           nanos.tolist())]
     return JointTrajectory(header=Header(stamp=stamp, frame_id=request_id),
                            joint_names=list(joint_names), points=points)

@@ -13,9 +13,11 @@ the executor; each request gets exactly one ``~/result``, whatever happens.
 
 from collections import deque
 import json
+import sys
 import threading
 import time
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
@@ -24,7 +26,8 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -39,7 +42,10 @@ from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap import RoadmapSettings
 
-RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+# Requests and answers: reliable and keep-all, so that a burst is delivered whole (a
+# keep-last reader cache drops the oldest samples of a burst longer than its depth).
+RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
+                      reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -231,12 +237,15 @@ class WaferPlannerNode(Node):
         level = 'warn' if result.warnings else 'ok'
         message = '; '.join(result.warnings) or (
             f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
+        # The trajectory before its result, so that a client holding the result can rely on
+        # the trajectory having been sent; the markers, for people, after both.
         self._send(('trajectory', messages.trajectory(result, request.request_id,
                                                       planner.cell.robot.joint_names, stamp)),
                    ('result', messages.result_status(
                        request.request_id, level, message,
-                       messages.plan_values(result, roadmap, request.start, request.goal))),
-                   ('path', markers.path_markers(planner.cell, result, settings.frame_id,
+                       dict(messages.plan_values(result, roadmap, request.start, request.goal),
+                            node_ms=(time.monotonic() - received) * 1000.0))))
+        self._send(('path', markers.path_markers(planner.cell, result, settings.frame_id,
                                                  stamp)))
         with self._lock:
             self._counts['served'] += 1
@@ -356,12 +365,14 @@ class WaferPlannerNode(Node):
 
 
 def _warm_up(planner) -> None:
-    """Plan once so that the compiled kernels are loaded before the first request."""
+    """Plan and serialise once: load the compiled kernels and message support up front."""
     names = sorted(planner.cell.stations)
     try:
-        planner.plan(names[0], names[-1])
+        result = planner.plan(names[0], names[-1])
     except (PlanningError, IndexError):
-        pass  # a cell whose first and last stations cannot be joined still warms up
+        return  # a cell whose first and last stations cannot be joined: warm enough
+    serialize_message(messages.trajectory(result, 'warm-up', planner.cell.robot.joint_names,
+                                          Time()))
 
 
 def _descriptor(spec) -> ParameterDescriptor:
@@ -378,6 +389,9 @@ def _descriptor(spec) -> ParameterDescriptor:
 
 def main(args=None) -> int:
     """Run the node until interrupted (Ctrl-C or SIGTERM)."""
+    # The worker plans in Python: let the executor's threads in for the GIL every 1 ms
+    # (default 5 ms) so that status queries and answers are not held up by planning.
+    sys.setswitchinterval(0.001)
     rclpy.init(args=args)
     node, executor, code = None, None, 0
     try:

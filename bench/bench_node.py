@@ -1,0 +1,226 @@
+"""
+Benchmark: the planning node as a process, asked over DDS on loopback.
+
+1. End-to-end latency, one request at a time (every directed station pair three times and
+   50 random free joint requests): request publish to result receipt, against the planning
+   time the node itself reports (the core planner's ``timings_ms['total']``).
+2. A burst of 200 station requests from 4 publishers at once: every result received, none
+   lost or duplicated, how many were BUSY, and ``~/get_status`` round trips throughout.
+3. The node's resident memory.
+Prints a table; writes ``bench/results/node.json``. Usage: ``make bench`` or
+``python bench/bench_node.py``.
+"""
+
+import json
+import os
+from pathlib import Path
+import platform
+import subprocess
+import sys
+import threading
+import time
+
+from bench_plan import random_pairs  # bench/ is the script's folder, first on sys.path
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.cli.plan import station_pairs
+from wafer_planner_ros.node.planner_node import RELIABLE
+
+RESULTS = Path(__file__).resolve().parent / 'results' / 'node.json'
+BURST, PUBLISHERS = 200, 4
+
+
+class Peer(Node):
+    """Sends requests and collects every result with its receipt time."""
+
+    def __init__(self):
+        """Create the publishers, the result subscription and the status client."""
+        super().__init__('bench_peer')
+        self.received = {}
+        self.duplicates = 0
+        self.lock = threading.Lock()
+        self.create_subscription(DiagnosticStatus, '/wafer_planner/result', self.on_result,
+                                 RELIABLE)
+        self.stations = [self.create_publisher(String, '/wafer_planner/plan_station_request',
+                                               RELIABLE) for _ in range(PUBLISHERS)]
+        self.joints = self.create_publisher(JointTrajectory, '/wafer_planner/plan_request',
+                                            RELIABLE)
+        self.status = self.create_client(Trigger, '/wafer_planner/get_status')
+
+    def on_result(self, msg: DiagnosticStatus) -> None:
+        """Keep the first result per id; count any second one."""
+        now = time.perf_counter()
+        with self.lock:
+            if msg.name in self.received:
+                self.duplicates += 1
+            else:
+                self.received[msg.name] = (now, {kv.key: kv.value for kv in msg.values})
+
+    def wait(self, request_id: str, timeout: float = 120.0):
+        """Return (receipt time, values) of a result."""
+        deadline = time.monotonic() + timeout
+        while request_id not in self.received:
+            if time.monotonic() > deadline:
+                raise TimeoutError(request_id)
+            time.sleep(0.0005)
+        return self.received[request_id]
+
+    def status_round_trip(self) -> float:
+        """Return the ``~/get_status`` round trip (ms)."""
+        started = time.perf_counter()
+        future = self.status.call_async(Trigger.Request())
+        while not future.done():
+            time.sleep(0.0002)
+        return (time.perf_counter() - started) * 1000.0
+
+
+def main() -> int:
+    """Run the benchmark."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_DOMAIN_ID=str(150 + os.getpid() % 50))
+    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                      ROS_DOMAIN_ID=env['ROS_DOMAIN_ID'])
+    node = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.planner_node',
+                             '--ros-args', '-p', 'planning.timeout:=60.0',
+                             '-p', f'planning.max_queue:={BURST + 10}'],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rclpy.init()
+    peer = Peer()
+    executor = SingleThreadedExecutor()
+    executor.add_node(peer)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        report = run(peer)
+        report['node_memory_mb'] = _memory(node.pid)
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        rclpy.try_shutdown()
+        node.terminate()
+        node.wait(timeout=60)
+    report['machine'] = {'cpus': os.cpu_count(), 'python': platform.python_version(),
+                         'platform': platform.platform()}
+    e2e, burst = report['sequential'], report['burst']
+    print(f"sequential: {e2e['requests']} requests, end-to-end median "
+          f"{e2e['e2e_ms']['median']:.1f} ms (p99 {e2e['e2e_ms']['p99']:.1f}), planner median {e2e['planner_ms']['median']:.1f}"
+          f" ms; overhead median {e2e['overhead_ms']['median']:.2f} ms "
+          f"(p99 {e2e['overhead_ms']['p99']:.2f}): in the node "
+          f"{e2e['in_node_overhead_ms']['median']:.2f}, transport and peer "
+          f"{e2e['transport_ms']['median']:.2f}")
+    print(f"burst: {burst['received']}/{burst['sent']} results ({burst['ok']} ok, "
+          f"{burst['busy']} BUSY), {burst['duplicates']} duplicates, in {burst['seconds']:.1f}"
+          f" s; get_status {burst['status_ms']['n']} calls: median "
+          f"{burst['status_ms']['median']:.2f} ms, max {burst['status_ms']['max']:.2f} ms")
+    print(f"node memory: {report['node_memory_mb']}")
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(report, indent=1) + '\n')
+    print(f'written {RESULTS}', file=sys.stderr)
+    return 0
+
+
+def run(peer: Peer) -> dict:
+    """Run the sequential and burst parts; return the figures."""
+    deadline = time.monotonic() + 120.0
+    while True:  # discovery, then the node's readiness
+        ready = peer.status.service_is_ready() and peer.joints.get_subscription_count() > 0 \
+            and all(p.get_subscription_count() > 0 for p in peer.stations)
+        if ready:
+            future = peer.status.call_async(Trigger.Request())
+            while not future.done():
+                time.sleep(0.001)
+            if json.loads(future.result().message)['ready']:
+                break
+        if time.monotonic() > deadline:
+            raise TimeoutError('the node did not become ready')
+        time.sleep(0.05)
+    cell = Cell.from_yaml(default_cell_path())
+    pairs = station_pairs(cell)
+    e2e, planner, in_node = [], [], []
+    for k, (a, b) in enumerate(pairs * 3):
+        started = time.perf_counter()
+        peer.stations[0].publish(String(data=json.dumps({'id': f's{k}', 'from': a, 'to': b})))
+        received, values = peer.wait(f's{k}')
+        e2e.append((received - started) * 1000.0)
+        planner.append(float(values['planning_time_ms']))
+        in_node.append(float(values['node_ms']))
+    for k, (a, b) in enumerate(random_pairs(cell, 50)):
+        msg = JointTrajectory()
+        msg.header.frame_id = f'j{k}'
+        msg.points = [JointTrajectoryPoint(positions=a.tolist()),
+                      JointTrajectoryPoint(positions=b.tolist())]
+        started = time.perf_counter()
+        peer.joints.publish(msg)
+        received, values = peer.wait(f'j{k}')
+        if 'planning_time_ms' in values:
+            e2e.append((received - started) * 1000.0)
+            planner.append(float(values['planning_time_ms']))
+            in_node.append(float(values['node_ms']))
+    e2e, planner, in_node = np.array(e2e), np.array(planner), np.array(in_node)
+    sequential = {'requests': len(e2e), 'e2e_ms': _stats(e2e), 'planner_ms': _stats(planner),
+                  'overhead_ms': _stats(e2e - planner),
+                  'in_node_overhead_ms': _stats(in_node - planner),
+                  'transport_ms': _stats(e2e - in_node)}
+    # The burst: 4 publishers at once, get_status polled throughout.
+    ids = [[f'b{p}-{k}' for k in range(BURST // PUBLISHERS)] for p in range(PUBLISHERS)]
+    status_ms, done = [], threading.Event()
+
+    def publish(p: int) -> None:
+        for k, request_id in enumerate(ids[p]):
+            a, b = pairs[(p + k) % len(pairs)]
+            peer.stations[p].publish(String(data=json.dumps(
+                {'id': request_id, 'from': a, 'to': b})))
+
+    def poll() -> None:
+        while not done.is_set():
+            status_ms.append(peer.status_round_trip())
+            time.sleep(0.02)
+
+    poller = threading.Thread(target=poll)
+    poller.start()
+    started = time.perf_counter()
+    senders = [threading.Thread(target=publish, args=(p,)) for p in range(PUBLISHERS)]
+    for thread in senders:
+        thread.start()
+    for thread in senders:
+        thread.join()
+    every = [i for group in ids for i in group]
+    for request_id in every:
+        peer.wait(request_id, timeout=600.0)
+    seconds = time.perf_counter() - started
+    time.sleep(1.0)  # a duplicate would arrive now
+    done.set()
+    poller.join()
+    codes = [peer.received[i][1]['code'] for i in every]
+    burst = {'sent': len(every), 'received': sum(1 for i in every if i in peer.received),
+             'duplicates': peer.duplicates, 'ok': codes.count('OK'),
+             'busy': codes.count('BUSY'), 'seconds': seconds,
+             'status_ms': _stats(np.array(status_ms))}
+    return {'benchmark': 'wafer_planner_node over DDS on loopback, default cell',
+            'sequential': sequential, 'burst': burst}
+
+
+def _memory(pid: int) -> dict:
+    fields = {}
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        key, _, value = line.partition(':')
+        if key in ('VmRSS', 'VmHWM'):
+            fields[key] = round(int(value.split()[0]) / 1024.0, 1)
+    return fields
+
+
+def _stats(values: np.ndarray) -> dict:
+    return {'median': float(np.median(values)), 'p99': float(np.percentile(values, 99)),
+            'max': float(values.max()), 'n': int(len(values))}
+
+
+if __name__ == '__main__':
+    sys.exit(main())
