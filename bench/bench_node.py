@@ -112,7 +112,8 @@ def main() -> int:
     e2e, burst = report['sequential'], report['burst']
     print(f"sequential: {e2e['requests']} requests, end-to-end median "
           f"{e2e['e2e_ms']['median']:.1f} ms (p99 {e2e['e2e_ms']['p99']:.1f}), planner "
-          f"median {e2e['planner_ms']['median']:.1f} ms; overhead median {e2e['overhead_ms']['median']:.2f} ms "
+          f"median {e2e['planner_ms']['median']:.1f} ms; overhead median "
+          f"{e2e['overhead_ms']['median']:.2f} ms "
           f"(p99 {e2e['overhead_ms']['p99']:.2f}): in the node "
           f"{e2e['in_node_overhead_ms']['median']:.2f}, transport and peer "
           f"{e2e['transport_ms']['median']:.2f}")
