@@ -141,6 +141,13 @@ def test_services_answer(harness):
     assert not answer.success and 'not available' in answer.message
     rebuilt = harness.call('rebuild_roadmap')
     assert rebuilt.success, rebuilt.message
+    # While it runs: status answers, a second rebuild is refused, requests are not ready.
+    during = harness.status()
+    assert not during['ready']
+    assert not harness.call('rebuild_roadmap').success
+    harness.send_stations({'id': 'during-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
+    assert values(harness.result('during-rebuild'))['code'] == 'ROADMAP_NOT_READY'
+    wait_for(lambda: harness.status()['ready'], 120)
     assert harness.status()['hash'] == status['hash']  # same parameters, same roadmap
     harness.send_stations({'id': 'after-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
     assert harness.result('after-rebuild').level == DiagnosticStatus.OK

@@ -26,7 +26,7 @@ WINDOW = 2 * DEGREE + 1
 """Durations a span's points depend on: h_{s-3}..h_{s+3}."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def knots_from_intervals(intervals):
     """Return the clamped cubic knot vector of span durations h (s): m + 7 knots."""
     knots = np.zeros(len(intervals) + 2 * DEGREE + 1, dtype=intervals.dtype)
@@ -36,7 +36,7 @@ def knots_from_intervals(intervals):
     return knots
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def derivative_points(points, knots, degree):
     """Return the control points (n - 1, d) of the derivative spline (Eq. 6-7)."""
     n = points.shape[0]
@@ -50,7 +50,7 @@ def padded_windows(intervals: np.ndarray, span: np.ndarray) -> tuple:
     return padded, np.asarray(span)[:, None] + np.arange(WINDOW)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def window_states(h, points, fraction):
     """
     Return q, q', q'', q''' (4, 3) at ``fraction`` (0..1) of a span.
@@ -94,7 +94,7 @@ def window_states(h, points, fraction):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _states_many(padded, windows, points, span, fraction):
     """Return window_states for many (span, fraction) samples, (K, 4, 3)."""
     out = np.empty((len(span), DEGREE + 1, 3))
@@ -117,7 +117,7 @@ _FALLING = np.array([[factorial(j) / factorial(j - order) if j >= order else 0.0
 """j! / (j - order)!: the factor of tau^(j - order) in the order-th derivative."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _horner(coefficients, starts, span, t, order):
     """Return the order-th derivative (N, 3) of the Taylor pieces at times t in ``span``."""
     out = np.empty((len(t), coefficients.shape[2]))

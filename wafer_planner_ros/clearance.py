@@ -114,7 +114,7 @@ class ClearanceModel:
                        crossing=bool(gaps[body, edge] == -self.radii[body]))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _spine_distances(q, base, link_lengths, edge_start, edge_end, edge_len_sq, base_dist,
                      per_edge):
     """

@@ -43,7 +43,7 @@ def _unwind(parent: np.ndarray, goal: int) -> list:
     return path[::-1]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _astar(indptr, indices, weights, n_graph, extra_ptr, extra_to, extra_w, coords, start,
            goal):
     """Return (found, parent (N,), cost of the goal): A* with a binary heap of (f, node)."""
@@ -76,7 +76,7 @@ def _astar(indptr, indices, weights, n_graph, extra_ptr, extra_to, extra_w, coor
     return False, parent, np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _relax(node, lo, hi, to, weights, cost, parent, heuristic, keys, nodes, size):
     """Relax the edges node -> to[lo:hi]; push what improved; return the heap size."""
     for e in range(lo, hi):
@@ -89,12 +89,12 @@ def _relax(node, lo, hi, to, weights, cost, parent, heuristic, keys, nodes, size
     return size
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _before(keys, nodes, a, b):
     return keys[a] < keys[b] or (keys[a] == keys[b] and nodes[a] < nodes[b])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sift_up(keys, nodes, i):
     while i > 0:
         up = (i - 1) // 2
@@ -105,7 +105,7 @@ def _sift_up(keys, nodes, i):
         i = up
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sift_down(keys, nodes, size):
     i = 0
     while True:

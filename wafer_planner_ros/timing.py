@@ -327,7 +327,7 @@ def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
     return result
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _wafer_rows(padded, windows, points, span, fraction, link_lengths, limits, gradients):
     """
     Return the wafer constraints (c, K) at the samples and, when ``gradients``, (c, K, 5).
@@ -361,7 +361,7 @@ def _wafer_rows(padded, windows, points, span, fraction, link_lengths, limits, g
     return values, local
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _wafer_g(ax, ay, limits):
     """Return the x, y and |a| constraint values g = 1 - (a / limit)^2 (float or complex)."""
     norm = 1.0 + 0.0 * ax
@@ -370,7 +370,7 @@ def _wafer_g(ax, ay, limits):
     return (1.0 - (ax / limits[0]) ** 2, 1.0 - (ay / limits[1]) ** 2, norm)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _control_rows(intervals, points, limits, gradients):
     """
     Return the control-point constraints (R,) and, when ``gradients``, their Jacobian (R, m).

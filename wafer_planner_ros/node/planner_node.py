@@ -1,8 +1,9 @@
 """
 The planning node ``wafer_planner`` (SPEC section 5): a thin ROS edge around the core.
 
-Threads: the executor's (subscriptions, services, the diagnostics timer, publishing) and
-one worker that loads or rebuilds the roadmap and plans, one request at a time. Requests
+Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
+publishing: every callback is short) and one worker that loads or rebuilds the roadmap and
+plans, one request at a time; the compiled kernels release the GIL. Requests
 are read and checked in the subscription callback, then wait in a bounded backlog
 (``planning.max_queue``; beyond it the answer is ``BUSY``). While the roadmap loads or is
 rebuilt new requests are answered ``ROADMAP_NOT_READY``; a request still waiting
@@ -22,9 +23,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
@@ -72,27 +72,20 @@ class WaferPlannerNode(Node):
         self._counts = {'served': 0, 'failed': 0}
         self._last_error = ''
         self._stopping = False
-        requests = MutuallyExclusiveCallbackGroup()
-        self._status_group = ReentrantCallbackGroup()
-        self._rebuild_group = MutuallyExclusiveCallbackGroup()
         self._trajectory_pub = self.create_publisher(JointTrajectory, '~/trajectory', RELIABLE)
         self._result_pub = self.create_publisher(DiagnosticStatus, '~/result', RELIABLE)
         self._roadmap_pub = self.create_publisher(MarkerArray, '~/roadmap_markers', LATCHED)
         self._path_pub = self.create_publisher(MarkerArray, '~/path_markers', RELIABLE)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(JointTrajectory, '~/plan_request', self._on_joint_request,
-                                 RELIABLE, callback_group=requests)
+                                 RELIABLE)
         self.create_subscription(String, '~/plan_station_request', self._on_station_request,
-                                 RELIABLE, callback_group=requests)
-        self.create_service(Trigger, '~/get_status', self._on_get_status,
-                            callback_group=self._status_group)
-        self.create_service(Trigger, '~/rebuild_roadmap', self._on_rebuild,
-                            callback_group=self._rebuild_group)
-        self.create_service(SetBool, '~/set_recording', self._on_set_recording,
-                            callback_group=self._status_group)
-        self._deliver = self.create_guard_condition(self._on_deliver,
-                                                    callback_group=self._status_group)
-        self.create_timer(1.0, self._publish_health, callback_group=self._status_group)
+                                 RELIABLE)
+        self.create_service(Trigger, '~/get_status', self._on_get_status)
+        self.create_service(Trigger, '~/rebuild_roadmap', self._on_rebuild)
+        self.create_service(SetBool, '~/set_recording', self._on_set_recording)
+        self._deliver = self.create_guard_condition(self._on_deliver)
+        self.create_timer(1.0, self._publish_health)
         self._worker = threading.Thread(target=self._work, name='wafer_planner_worker',
                                         daemon=True)
         self._backlog.append(('load', None))
@@ -161,8 +154,8 @@ class WaferPlannerNode(Node):
                 with self._lock:
                     self._busy_with = None
 
-    def _load(self, done) -> None:
-        """Load or build the roadmap for the current parameters; set ``done`` when over."""
+    def _load(self, _unused) -> None:
+        """Load or build the roadmap for the current parameters."""
         with self._lock:
             self._planner = None
             settings = self.settings
@@ -182,8 +175,6 @@ class WaferPlannerNode(Node):
             self.get_logger().error(self._last_error)
             with self._lock:
                 self._cached, self._load_failed = None, True
-            if done is not None:
-                done.set()
             return
         roadmap = cached.roadmap
         with self._lock:
@@ -194,8 +185,6 @@ class WaferPlannerNode(Node):
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
             f'(ready {time.monotonic() - started:.2f} s after loading began)')
-        if done is not None:
-            done.set()
 
     def _progress(self):
         logger, last = self.get_logger(), [-1]
@@ -307,17 +296,18 @@ class WaferPlannerNode(Node):
         return response
 
     def _on_rebuild(self, request, response):
-        done = threading.Event()
         with self._lock:
+            if any(kind == 'load' for kind, _ in self._backlog) or \
+                    self._busy_with == 'load':
+                response.success = False
+                response.message = 'a roadmap load or rebuild is already under way'
+                return response
             self._planner = None
-            self._busy_with = 'rebuild'
-            self._backlog.append(('load', done))
+            self._backlog.append(('load', None))
             self._lock.notify()
-        done.wait()
-        status = self.status()
-        response.success = status['ready']
-        response.message = (f'rebuilt: {status["nodes"]} nodes, {status["edges"]} edges, hash '
-                            f'{status["hash"][:12]}' if status['ready'] else self._last_error)
+        response.success = True
+        response.message = ('rebuild started with the current parameters; ~/get_status '
+                            'reports ready when it is done')
         return response
 
     def _on_set_recording(self, request, response):
@@ -396,7 +386,7 @@ def main(args=None) -> int:
     node, executor, code = None, None, 0
     try:
         node = WaferPlannerNode()
-        executor = MultiThreadedExecutor(num_threads=4)
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
