@@ -18,7 +18,6 @@ import sys
 import threading
 import time
 
-from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
@@ -27,7 +26,6 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -355,14 +353,12 @@ class WaferPlannerNode(Node):
 
 
 def _warm_up(planner) -> None:
-    """Plan and serialise once: load the compiled kernels and message support up front."""
+    """Plan once so that the compiled kernels are loaded before the first request."""
     names = sorted(planner.cell.stations)
     try:
-        result = planner.plan(names[0], names[-1])
+        planner.plan(names[0], names[-1])
     except (PlanningError, IndexError):
-        return  # a cell whose first and last stations cannot be joined: warm enough
-    serialize_message(messages.trajectory(result, 'warm-up', planner.cell.robot.joint_names,
-                                          Time()))
+        pass  # a cell whose first and last stations cannot be joined still warms up
 
 
 def _descriptor(spec) -> ParameterDescriptor:
