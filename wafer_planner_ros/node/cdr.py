@@ -30,7 +30,7 @@ def joint_trajectory(stamp_sec: int, stamp_nanosec: int, frame_id: str,
     nanoseconds = np.round(np.asarray(times, float) * 1e9).astype(np.int64)
     seconds, nanos = np.divmod(nanoseconds, 1_000_000_000)
     if count == 0:
-        return writer.bytes()
+        return writer.serialised()
     for rows in (positions, velocities, accelerations):  # the first point, field by field
         writer.doubles(rows[0])
     writer.uint32(0)  # effort
@@ -43,7 +43,7 @@ def joint_trajectory(stamp_sec: int, stamp_nanosec: int, frame_id: str,
         rest[name + '_count'] = joints
         rest[name] = rows[1:]
     rest['sec'], rest['nanosec'] = seconds[1:], nanos[1:]
-    return writer.bytes() + rest.tobytes()
+    return writer.serialised() + rest.tobytes()
 
 
 def _point_layout(joints: int) -> np.dtype:
@@ -95,5 +95,5 @@ class _Writer:
             self._align(8)
             self.payload += values.tobytes()
 
-    def bytes(self) -> bytes:
+    def serialised(self) -> bytes:
         return b'\x00\x01\x00\x00' + bytes(self.payload)
