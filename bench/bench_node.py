@@ -11,6 +11,7 @@ Prints a table; writes ``bench/results/node.json``. Usage: ``make bench`` or
 ``python bench/bench_node.py``.
 """
 
+import gc
 import json
 import os
 from pathlib import Path
@@ -120,7 +121,8 @@ def main() -> int:
     print(f"burst: {burst['received']}/{burst['sent']} results ({burst['ok']} ok, "
           f"{burst['busy']} BUSY), {burst['duplicates']} duplicates, in {burst['seconds']:.1f}"
           f" s; get_status {burst['status_ms']['n']} calls: median "
-          f"{burst['status_ms']['median']:.2f} ms, max {burst['status_ms']['max']:.2f} ms")
+          f"{burst['status_ms']['median']:.2f} ms, max {burst['status_ms']['max']:.2f} ms; "
+          f"slowest (ms, s into the burst): {burst['slowest_status']}")
     print(f"node memory: {report['node_memory_mb']}")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(report, indent=1) + '\n')
@@ -172,7 +174,8 @@ def run(peer: Peer) -> dict:
                   'transport_ms': _stats(e2e - in_node)}
     # The burst: 4 publishers at once, get_status polled throughout.
     ids = [[f'b{p}-{k}' for k in range(BURST // PUBLISHERS)] for p in range(PUBLISHERS)]
-    status_ms, done = [], threading.Event()
+    status_ms, status_at, done = [], [], threading.Event()
+    started = time.perf_counter()
 
     def publish(p: int) -> None:
         for k, request_id in enumerate(ids[p]):
@@ -183,11 +186,13 @@ def run(peer: Peer) -> dict:
     def poll() -> None:
         while not done.is_set():
             status_ms.append(peer.status_round_trip())
+            status_at.append(time.perf_counter() - started)
             time.sleep(0.02)
 
+    gc.collect()
+    gc.freeze()  # keep this process's own collector pauses out of the status times
     poller = threading.Thread(target=poll)
     poller.start()
-    started = time.perf_counter()
     senders = [threading.Thread(target=publish, args=(p,)) for p in range(PUBLISHERS)]
     for thread in senders:
         thread.start()
@@ -204,7 +209,9 @@ def run(peer: Peer) -> dict:
     burst = {'sent': len(every), 'received': sum(1 for i in every if i in peer.received),
              'duplicates': peer.duplicates, 'ok': codes.count('OK'),
              'busy': codes.count('BUSY'), 'seconds': seconds,
-             'status_ms': _stats(np.array(status_ms))}
+             'status_ms': _stats(np.array(status_ms)),
+             'slowest_status': sorted(([round(ms, 1), round(at, 2)] for ms, at
+                                       in zip(status_ms, status_at)), reverse=True)[:5]}
     return {'benchmark': 'wafer_planner_node over DDS on loopback, default cell',
             'sequential': sequential, 'burst': burst}
 

@@ -13,6 +13,7 @@ the executor; each request gets exactly one ``~/result``, whatever happens.
 """
 
 from collections import deque
+import gc
 import json
 import sys
 import threading
@@ -175,6 +176,10 @@ class WaferPlannerNode(Node):
                 self._cached, self._load_failed = None, True
             return
         roadmap = cached.roadmap
+        # Everything loaded so far lives as long as the node: keep it out of the garbage
+        # collector's full passes, which otherwise pause every thread for tens of ms.
+        gc.collect()
+        gc.freeze()
         with self._lock:
             self._cached, self._planner, self._load_failed = cached, planner, False
         self._send(('markers', markers.roadmap_markers(cell, roadmap, settings.frame_id,
