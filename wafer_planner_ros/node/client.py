@@ -21,6 +21,8 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from wafer_planner_ros.cli.common import UsageError
+from wafer_planner_ros.cli.plan import parse_end
 from wafer_planner_ros.node.planner_node import RELIABLE
 
 
@@ -36,8 +38,8 @@ def main(argv=None) -> int:
                         help='the planner node (default: /wafer_planner)')
     args = parser.parse_args(argv)
     try:
-        ends = [_end(args.start), _end(args.goal)]
-    except ValueError as exc:
+        ends = [parse_end(args.start), parse_end(args.goal)]
+    except UsageError as exc:
         parser.error(str(exc))
     request_id = args.id or f'client-{os.getpid()}-{int(time.time() * 1000)}'
     rclpy.init()
@@ -104,16 +106,6 @@ class _Client(Node):
             return bool(future.done() and json.loads(future.result().message).get('ready'))
         except ValueError:
             return False
-
-
-def _end(text: str):
-    """Return a station name or a list of three angles from FROM/TO."""
-    if ',' not in text:
-        return text
-    try:
-        return [float(v) for v in text.split(',')]
-    except ValueError:
-        raise ValueError(f'{text!r} is neither a station name nor q1,q2,q3') from None
 
 
 def entry_point() -> None:
