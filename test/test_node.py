@@ -6,6 +6,7 @@ from node_harness import Harness, isolate_dds, values, wait_for
 import numpy as np
 import pytest
 import rclpy
+from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
 from wafer_planner_ros.cache import load_or_build
@@ -86,7 +87,6 @@ def test_joint_request_in_any_joint_order(harness, default_cell):
 ])
 def test_every_bad_input_gets_one_error_and_the_node_serves_on(
         harness, kind, request_id, payload, code):
-    from std_msgs.msg import String
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
     before = len(harness.results)
     if kind == 'stations':
@@ -204,7 +204,6 @@ def test_bad_parameter_at_start_up_is_rejected(tmp_path):
 
 def test_random_requests_each_get_exactly_one_result(harness):
     from hypothesis import given, HealthCheck, settings, strategies as st
-    from std_msgs.msg import String
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
     names = ['joint_1', 'joint_2', 'joint_3', 'shoulder', 'elbow', 'wrist', '']
     floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
@@ -244,3 +243,28 @@ def test_random_requests_each_get_exactly_one_result(harness):
 def _json(data) -> str:
     import json
     return json.dumps(data, allow_nan=True)
+
+
+def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp_path):
+    from rclpy.parameter import Parameter
+    from wafer_planner_ros.node.planner_node import WaferPlannerNode
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    missing = tmp_path / 'missing.yaml'
+    node = WaferPlannerNode(context=context,
+                            parameter_overrides=[Parameter('cell_file', value=str(missing))])
+    try:
+        wait_for(lambda: node.status()['busy_with'] is None and node.status()['last_error'],
+                 30)
+        status = node.status()
+        assert not status['ready'] and str(missing) in status['last_error']
+        answers = []
+        node._send = lambda *items: answers.extend(items)  # catch what would be published
+        node._on_station_request(
+            String(data='{"id": "n1", "from": "loadport1", "to": "loadlock1"}'))
+        (kind, result), = answers
+        assert kind == 'result' and result.name == 'n1'
+        assert values(result)['code'] == 'ROADMAP_NOT_READY' and str(missing) in result.message
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

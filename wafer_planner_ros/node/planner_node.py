@@ -148,13 +148,13 @@ class WaferPlannerNode(Node):
                 if kind == 'plan':
                     self._plan(*item)
                 else:
-                    self._load(item)
+                    self._load()
             finally:
                 with self._lock:
                     self._busy_with = None
 
-    def _load(self, _unused) -> None:
-        """Load or build the roadmap for the current parameters."""
+    def _load(self) -> None:
+        """Load or build the roadmap for the current parameters; never raise."""
         with self._lock:
             self._planner = None
             settings = self.settings
@@ -169,8 +169,10 @@ class WaferPlannerNode(Node):
             planner = Planner(cell, cached.roadmap,
                               PlannerSettings(sample_period=settings.sample_period))
             _warm_up(planner)
-        except (WaferPlannerError, ValueError, OSError) as exc:
-            self._last_error = f'roadmap not loaded: {exc}'
+        except Exception as exc:  # noqa: B902 - the node stays up and says why
+            kind = '' if isinstance(exc, (WaferPlannerError, ValueError, OSError)) else \
+                'internal error: '
+            self._last_error = f'roadmap not loaded: {kind}{exc}'
             self.get_logger().error(self._last_error)
             with self._lock:
                 self._cached, self._load_failed = None, True
