@@ -47,6 +47,8 @@ def main(argv=None) -> int:
         client = _Client(args.node)
         answer = client.ask({'id': request_id, 'from': ends[0], 'to': ends[1]}, args.timeout)
         client.destroy_node()
+    except KeyboardInterrupt:
+        answer = None
     finally:
         rclpy.try_shutdown()
     if answer is None:
