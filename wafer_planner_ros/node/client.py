@@ -32,8 +32,9 @@ def main(argv=None) -> int:
     parser.add_argument('start', metavar='FROM', help='station name or q1,q2,q3')
     parser.add_argument('goal', metavar='TO', help='station name or q1,q2,q3')
     parser.add_argument('--id', help='request id (default: client-<pid>-<time>)')
-    parser.add_argument('--timeout', type=float, default=10.0,
-                        help='seconds to wait for the node and its answer (default: 10)')
+    parser.add_argument('--timeout', type=float, default=30.0,
+                        help='seconds to wait for the node (a first run compiles for ~10 s) '
+                             'and its answer (default: 30)')
     parser.add_argument('--node', default='/wafer_planner',
                         help='the planner node (default: /wafer_planner)')
     args = parser.parse_args(argv)
