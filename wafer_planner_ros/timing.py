@@ -121,17 +121,16 @@ class TimingProblem:
         """Return the samples at ``fraction`` (0..1) of the given spans."""
         return Samples(span=np.asarray(span, np.int64), fraction=np.asarray(fraction, float))
 
-    def derivatives(self, intervals, jerk=None) -> tuple:
+    def derivatives(self, intervals) -> tuple:
         """
         Return (knots, [velocity, acceleration (, jerk)] control points) of a timing.
 
-        Jerk control points come when ``jerk`` is True, or by default when the cell limits
-        jerk.
+        Jerk control points come when the cell limits jerk.
         """
         knots = knots_from_intervals(np.ascontiguousarray(intervals, float))
         out = [derivative_points(self.points, knots, DEGREE)]
         out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
-        if jerk or (jerk is None and self.limits.jerk is not None):
+        if self.limits.jerk is not None:
             out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
         return knots, out
 

@@ -94,10 +94,15 @@ class WaferPlannerNode(Node):
 
     def _on_joint_request(self, msg: JointTrajectory) -> None:
         received = time.monotonic()
+        cell = self._cell
+        if cell is None:  # the joint names cannot be checked yet: not ready, as documented
+            self._answer_error(msg.header.frame_id, ErrorCode.ROADMAP_NOT_READY,
+                               'not ready: the cell is being loaded', None, None)
+            return
         try:
             request = joint_request(msg.header.frame_id, msg.joint_names,
                                     [p.positions for p in msg.points],
-                                    self._robot_joints())
+                                    cell.robot.joint_names)
         except RequestError as exc:
             self._answer_error(exc.request_id, exc.code, exc.message, None, None)
             return
@@ -111,10 +116,6 @@ class WaferPlannerNode(Node):
             self._answer_error(exc.request_id, exc.code, exc.message, None, None)
             return
         self._enqueue(request, received)
-
-    def _robot_joints(self):
-        cell = self._cell
-        return cell.robot.joint_names if cell is not None else ('joint_1', 'joint_2', 'joint_3')
 
     def _enqueue(self, request, received: float) -> None:
         with self._lock:
