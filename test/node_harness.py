@@ -2,6 +2,7 @@
 
 import json
 import os
+import tempfile
 import threading
 import time
 
@@ -25,15 +26,12 @@ def isolate_dds(tmp_path) -> None:
     os.environ['ROS_LOG_DIR'] = str(tmp_path / 'ros_log')
 
 
-class Harness:
-    """A planner node and a peer node on one private context and executor thread."""
+class Peer:
+    """A node that talks to ``/wafer_planner`` from an executor thread of its own."""
 
-    def __init__(self, parameters: dict):
-        """Start the node with ``parameters`` (name -> value) and wait until it is ready."""
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        overrides = [Parameter(k, value=v) for k, v in parameters.items()]
-        self.node = WaferPlannerNode(context=self.context, parameter_overrides=overrides)
+    def __init__(self, context, nodes=()):
+        """Spin a peer (and ``nodes``) on ``context``; wait until the node's topics match."""
+        self.context = context
         self.peer = Node('test_peer', context=self.context)
         self.results, self.trajectories, self.roadmap_markers = [], [], []
         self.peer.create_subscription(DiagnosticStatus, '/wafer_planner/result',
@@ -49,8 +47,8 @@ class Harness:
                                            ('rebuild_roadmap', Trigger),
                                            ('set_recording', SetBool))}
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.peer)
+        for node in (*nodes, self.peer):
+            self.executor.add_node(node)
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
         wait_for(lambda: self.joint_pub.get_subscription_count() > 0
@@ -94,11 +92,29 @@ class Harness:
         return next(r for r in self.results if r.name == request_id)
 
     def close(self) -> None:
-        """Stop everything."""
+        """Stop the executor and the peer."""
         self.executor.shutdown()
         self.thread.join(timeout=10)
-        self.node.destroy_node()
         self.peer.destroy_node()
+
+
+class Harness(Peer):
+    """A planner node and a peer node on one private context and executor thread."""
+
+    def __init__(self, parameters: dict):
+        """Start the node with ``parameters`` (name -> value) and wait until it is ready."""
+        self.recordings = tempfile.mkdtemp(prefix='wafer_recordings_')
+        parameters = {'recording.directory': self.recordings, **parameters}
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        overrides = [Parameter(k, value=v) for k, v in parameters.items()]
+        self.node = WaferPlannerNode(context=context, parameter_overrides=overrides)
+        super().__init__(context, [self.node])
+
+    def close(self) -> None:
+        """Stop everything."""
+        super().close()
+        self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 
 

@@ -6,8 +6,8 @@ from node_harness import Harness, isolate_dds, values, wait_for
 import numpy as np
 import pytest
 import rclpy
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
-from std_srvs.srv import SetBool
 
 from wafer_planner_ros.cache import load_or_build
 from wafer_planner_ros.planner import Planner
@@ -137,8 +137,6 @@ def test_services_answer(harness):
                 'last_error'):
         assert key in status
     assert status['ready'] and status['nodes'] == 1510 and status['edges'] == 40885
-    answer = harness.call('set_recording', SetBool.Request(data=True))
-    assert not answer.success and 'not available' in answer.message
     rebuilt = harness.call('rebuild_roadmap')
     assert rebuilt.success, rebuilt.message
     # While it runs: status answers, a second rebuild is refused, requests are not ready.
@@ -251,8 +249,9 @@ def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp
     context = rclpy.Context()
     rclpy.init(context=context)
     missing = tmp_path / 'missing.yaml'
-    node = WaferPlannerNode(context=context,
-                            parameter_overrides=[Parameter('cell_file', value=str(missing))])
+    node = WaferPlannerNode(context=context, parameter_overrides=[
+        Parameter('cell_file', value=str(missing)),
+        Parameter('recording.directory', value=str(tmp_path / 'recordings'))])
     try:
         wait_for(lambda: node.status()['busy_with'] is None and node.status()['last_error'],
                  30)
@@ -260,10 +259,11 @@ def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp
         assert not status['ready'] and str(missing) in status['last_error']
         answers = []
         node._send = lambda *items: answers.extend(items)  # catch what would be published
-        node._on_station_request(
-            String(data='{"id": "n1", "from": "loadport1", "to": "loadlock1"}'))
-        (kind, result), = answers
-        assert kind == 'result' and result.name == 'n1'
+        node._on_station_request(serialize_message(
+            String(data='{"id": "n1", "from": "loadport1", "to": "loadlock1"}')))
+        (kind, data, number), = answers
+        result = deserialize_message(data, DiagnosticStatus)
+        assert kind == 'result' and result.name == 'n1' and number == 1
         assert values(result)['code'] == 'ROADMAP_NOT_READY' and str(missing) in result.message
     finally:
         node.destroy_node()

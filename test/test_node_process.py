@@ -25,10 +25,12 @@ def _client(env, *args):
                           timeout=300)
 
 
-def test_node_process_answers_the_client_and_stops_on_sigint(dds_env, roadmap_cache):
+def test_node_process_answers_the_client_and_stops_on_sigint(
+        dds_env, roadmap_cache, tmp_path):
     node = subprocess.Popen(
         [sys.executable, '-m', 'wafer_planner_ros.node.planner_node', '--ros-args',
-         '-p', f'roadmap.cache_dir:={roadmap_cache}', '-p', 'planning.timeout:=60.0'],
+         '-p', f'roadmap.cache_dir:={roadmap_cache}', '-p', 'planning.timeout:=60.0',
+         '-p', f'recording.directory:={tmp_path / "recordings"}'],
         env=dds_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ok = _client(dds_env, 'loadport1', 'loadlock2', '--id', 'p1')

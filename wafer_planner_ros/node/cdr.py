@@ -1,5 +1,8 @@
 """
-The CDR bytes of a ``trajectory_msgs/JointTrajectory``, encoded from arrays at once.
+The CDR bytes of the messages the node sends most: trajectories (from arrays) and results.
+
+The recorder writes the very bytes that were published, and independent readers accept
+them; rclpy's own serialiser can append bytes that ``rosbags`` rejects.
 
 Building hundreds of ``JointTrajectoryPoint`` objects and letting rclpy convert them costs
 milliseconds per plan; the bytes, which ``Publisher.publish`` takes as they are, come from
@@ -9,7 +12,7 @@ point starts 4 bytes past an 8-byte boundary, so all but the first share one lay
 """
 
 import struct
-from typing import Sequence
+from typing import Sequence, Tuple
 
 import numpy as np
 
@@ -44,6 +47,20 @@ def joint_trajectory(stamp_sec: int, stamp_nanosec: int, frame_id: str,
         rest[name] = rows[1:]
     rest['sec'], rest['nanosec'] = seconds[1:], nanos[1:]
     return writer.serialised() + rest.tobytes()
+
+
+def diagnostic_status(level: int, name: str, message: str, hardware_id: str,
+                      values: Sequence[Tuple[str, str]]) -> bytes:
+    """Return a serialised ``diagnostic_msgs/DiagnosticStatus`` (``level``: 0-3)."""
+    writer = _Writer()
+    writer.payload.append(level)
+    for text in (name, message, hardware_id):
+        writer.string(text)
+    writer.uint32(len(values))
+    for key, value in values:
+        writer.string(key)
+        writer.string(value)
+    return writer.serialised()
 
 
 def _point_layout(joints: int) -> np.dtype:

@@ -66,38 +66,26 @@ def main(argv=None) -> int:
     return 0 if status.level in (DiagnosticStatus.OK, DiagnosticStatus.WARN) else 1
 
 
-class _Client(Node):
-    def __init__(self, planner: str):
-        super().__init__(f'wafer_plan_client_{os.getpid()}')
-        self.results, self.trajectories = {}, {}
-        self.create_subscription(DiagnosticStatus, f'{planner}/result',
-                                 lambda m: self.results.setdefault(m.name, m), RELIABLE)
-        self.create_subscription(JointTrajectory, f'{planner}/trajectory',
-                                 lambda m: self.trajectories.setdefault(m.header.frame_id, m),
-                                 RELIABLE)
-        self.requests = self.create_publisher(String, f'{planner}/plan_station_request',
-                                              RELIABLE)
-        self.status = self.create_client(Trigger, f'{planner}/get_status')
-        self.planner = planner
+class PlannerPeer(Node):
+    """A node that talks to a planner node: its answers, and waiting until it is ready."""
 
-    def ask(self, request: dict, timeout: float):
-        """Return (result, trajectory or None) for the request, or None after ``timeout``."""
-        deadline = time.monotonic() + timeout
-        while not self._ready() or self.requests.get_subscription_count() == 0 or \
-                self.count_publishers(f'{self.planner}/result') == 0:
+    def __init__(self, name: str, planner: str):
+        """Subscribe to ``<planner>/result``; keep the answers in ``answers``, in order."""
+        super().__init__(name)
+        self.planner = planner
+        self.answers = []
+        self.create_subscription(DiagnosticStatus, f'{planner}/result', self.answers.append,
+                                 RELIABLE)
+        self.status = self.create_client(Trigger, f'{planner}/get_status')
+
+    def wait_ready(self, deadline: float, publishers) -> bool:
+        """Spin until the planner is ready and hears ``publishers``; False after ``deadline``."""
+        while not self._ready() or any(p.get_subscription_count() == 0 for p in publishers) \
+                or self.count_publishers(f'{self.planner}/result') == 0:
             if time.monotonic() > deadline:
-                return None
+                return False
             rclpy.spin_once(self, timeout_sec=0.1)
-        self.requests.publish(String(data=json.dumps(request)))
-        rid = request['id']
-        while rid not in self.results:
-            if time.monotonic() > deadline:
-                return None
-            rclpy.spin_once(self, timeout_sec=0.05)
-        ok = self.results[rid].level in (DiagnosticStatus.OK, DiagnosticStatus.WARN)
-        while ok and rid not in self.trajectories and time.monotonic() < deadline:
-            rclpy.spin_once(self, timeout_sec=0.05)
-        return self.results[rid], self.trajectories.get(rid)
+        return True
 
     def _ready(self) -> bool:
         """Return whether the planner answers ``~/get_status`` with ready."""
@@ -109,6 +97,36 @@ class _Client(Node):
             return bool(future.done() and json.loads(future.result().message).get('ready'))
         except ValueError:
             return False
+
+
+class _Client(PlannerPeer):
+    def __init__(self, planner: str):
+        super().__init__(f'wafer_plan_client_{os.getpid()}', planner)
+        self.trajectories = {}
+        self.create_subscription(JointTrajectory, f'{planner}/trajectory',
+                                 lambda m: self.trajectories.setdefault(m.header.frame_id, m),
+                                 RELIABLE)
+        self.requests = self.create_publisher(String, f'{planner}/plan_station_request',
+                                              RELIABLE)
+
+    def ask(self, request: dict, timeout: float):
+        """Return (result, trajectory or None) for the request, or None after ``timeout``."""
+        deadline = time.monotonic() + timeout
+        if not self.wait_ready(deadline, [self.requests]):
+            return None
+        self.requests.publish(String(data=json.dumps(request)))
+        rid = request['id']
+        while (result := self._answer(rid)) is None:
+            if time.monotonic() > deadline:
+                return None
+            rclpy.spin_once(self, timeout_sec=0.05)
+        ok = result.level in (DiagnosticStatus.OK, DiagnosticStatus.WARN)
+        while ok and rid not in self.trajectories and time.monotonic() < deadline:
+            rclpy.spin_once(self, timeout_sec=0.05)
+        return result, self.trajectories.get(rid)
+
+    def _answer(self, request_id: str):
+        return next((m for m in self.answers if m.name == request_id), None)
 
 
 def entry_point() -> None:

@@ -3,13 +3,14 @@
 import json
 from typing import Mapping, Optional, Sequence
 
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 
 from wafer_planner_ros.node import cdr
 
-LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-          'error': DiagnosticStatus.ERROR}
+LEVELS = {name: ord(level) for name, level in (('ok', DiagnosticStatus.OK),
+                                                ('warn', DiagnosticStatus.WARN),
+                                                ('error', DiagnosticStatus.ERROR))}
 
 
 def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> bytes:
@@ -25,11 +26,10 @@ def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> by
 
 
 def result_status(request_id: str, level: str, message: str,
-                  values: Mapping[str, object]) -> DiagnosticStatus:
-    """Return the ``~/result`` status: name = request id, values as strings."""
-    return DiagnosticStatus(level=LEVELS[level], name=request_id, message=message,
-                            hardware_id='wafer_planner',
-                            values=[KeyValue(key=k, value=_text(v)) for k, v in values.items()])
+                  values: Mapping[str, object]) -> bytes:
+    """Return the serialised ``~/result`` status: name = request id, values as strings."""
+    return cdr.diagnostic_status(LEVELS[level], request_id, message, 'wafer_planner',
+                                 [(k, _text(v)) for k, v in values.items()])
 
 
 def plan_values(result, roadmap, start, goal) -> dict:

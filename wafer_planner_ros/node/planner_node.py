@@ -14,10 +14,12 @@ the executor; each request gets exactly one ``~/result``, whatever happens.
 
 from collections import deque
 import gc
+import itertools
 import json
 import sys
 import threading
 import time
+from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -27,6 +29,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -36,9 +39,11 @@ from wafer_planner_ros.cache import load_or_build
 from wafer_planner_ros.cell import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
 from wafer_planner_ros.node import markers, messages
-from wafer_planner_ros.node.requests import joint_request, RequestError, station_request
+from wafer_planner_ros.node.recording import Loaded, NodeRecording
+from wafer_planner_ros.node.requests import request_of, RequestError
 from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
 from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.roadmap import RoadmapSettings
 
 # Requests and answers: reliable and keep-all, so that a burst is delivered whole (a
@@ -47,6 +52,11 @@ RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
                       reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DURABLE_WAIT = 0.25
+"""Seconds an answer waits for its recording to be safe from a crash (a stalled disk)."""
+# The QoS profiles, as the recording's channel metadata states them.
+RELIABLE_OFFERED = qos(keep_all=True, depth=RELIABLE.depth)
+LATCHED_OFFERED = qos(depth=1, transient_local=True)
 
 
 class WaferPlannerNode(Node):
@@ -76,10 +86,26 @@ class WaferPlannerNode(Node):
         self._roadmap_pub = self.create_publisher(MarkerArray, '~/roadmap_markers', LATCHED)
         self._path_pub = self.create_publisher(MarkerArray, '~/path_markers', RELIABLE)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(JointTrajectory, '~/plan_request', self._on_joint_request,
-                                 RELIABLE)
-        self.create_subscription(String, '~/plan_station_request', self._on_station_request,
-                                 RELIABLE)
+        # Raw: the request's bytes are recorded exactly as they arrived.
+        self._joint_sub = self.create_subscription(
+            JointTrajectory, '~/plan_request', self._on_joint_request, RELIABLE, raw=True)
+        self._station_sub = self.create_subscription(
+            String, '~/plan_station_request', self._on_station_request, RELIABLE, raw=True)
+        self._numbers = itertools.count(1)
+        self._late_records = 0
+        self._recording = NodeRecording(self.get_name(), [
+            Topic(self._joint_sub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
+                  RELIABLE_OFFERED),
+            Topic(self._station_sub.topic_name, 'std_msgs/msg/String', RELIABLE_OFFERED),
+            Topic(self._trajectory_pub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
+                  RELIABLE_OFFERED),
+            Topic(self._result_pub.topic_name, 'diagnostic_msgs/msg/DiagnosticStatus',
+                  RELIABLE_OFFERED),
+            Topic(self._roadmap_pub.topic_name, 'visualization_msgs/msg/MarkerArray',
+                  LATCHED_OFFERED)], self._roadmap_pub.topic_name, self._recording_failed)
+        self._recording.parameters(self._parameter_values())
+        if self.settings.recording_enabled:
+            self._start_recording()
         self.create_service(Trigger, '~/get_status', self._on_get_status)
         self.create_service(Trigger, '~/rebuild_roadmap', self._on_rebuild)
         self.create_service(SetBool, '~/set_recording', self._on_set_recording)
@@ -92,32 +118,33 @@ class WaferPlannerNode(Node):
 
     # ----------------------------------------------------------------- requests in
 
-    def _on_joint_request(self, msg: JointTrajectory) -> None:
-        received = time.monotonic()
+    def _on_joint_request(self, data: bytes) -> None:
+        received, number = time.monotonic(), next(self._numbers)
+        self._recording.record(self._joint_sub.topic_name, data, number)
+        msg = deserialize_message(data, JointTrajectory)
         cell = self._cell
         if cell is None:  # the joint names cannot be checked yet: not ready, as documented
-            self._answer_error(msg.header.frame_id, ErrorCode.ROADMAP_NOT_READY,
+            self._answer_error(number, msg.header.frame_id, ErrorCode.ROADMAP_NOT_READY,
                                'not ready: the cell is being loaded', None, None)
             return
         try:
-            request = joint_request(msg.header.frame_id, msg.joint_names,
-                                    [p.positions for p in msg.points],
-                                    cell.robot.joint_names)
+            request = request_of('joint', msg, cell.robot.joint_names)
         except RequestError as exc:
-            self._answer_error(exc.request_id, exc.code, exc.message, None, None)
+            self._answer_error(number, exc.request_id, exc.code, exc.message, None, None)
             return
-        self._enqueue(request, received)
+        self._enqueue(number, request, received)
 
-    def _on_station_request(self, msg: String) -> None:
-        received = time.monotonic()
+    def _on_station_request(self, data: bytes) -> None:
+        received, number = time.monotonic(), next(self._numbers)
+        self._recording.record(self._station_sub.topic_name, data, number)
         try:
-            request = station_request(msg.data)
+            request = request_of('station', deserialize_message(data, String), ())
         except RequestError as exc:
-            self._answer_error(exc.request_id, exc.code, exc.message, None, None)
+            self._answer_error(number, exc.request_id, exc.code, exc.message, None, None)
             return
-        self._enqueue(request, received)
+        self._enqueue(number, request, received)
 
-    def _enqueue(self, request, received: float) -> None:
+    def _enqueue(self, number: int, request, received: float) -> None:
         with self._lock:
             if self._planner is None:
                 reason = self._last_error if self._load_failed else \
@@ -129,10 +156,11 @@ class WaferPlannerNode(Node):
                 message = (f'busy: {self.settings.max_queue} requests are already waiting '
                            '(planning.max_queue)')
             else:
-                self._backlog.append(('plan', (request, received)))
+                self._backlog.append(('plan', (number, request, received)))
                 self._lock.notify()
                 return
-        self._answer_error(request.request_id, code, message, request.start, request.goal)
+        self._answer_error(number, request.request_id, code, message, request.start,
+                           request.goal)
 
     # ----------------------------------------------------------------- the worker
 
@@ -161,6 +189,7 @@ class WaferPlannerNode(Node):
             settings = self.settings
         started = time.monotonic()
         try:
+            cell_text = settings.cell_file.read_bytes()
             cell = Cell.from_yaml(settings.cell_file)
             self._cell = cell
             self.get_logger().info(f'cell {cell.name} from {settings.cell_file}; loading or '
@@ -183,10 +212,18 @@ class WaferPlannerNode(Node):
         # collector's full passes, which otherwise pause every thread for tens of ms.
         gc.collect()
         gc.freeze()
+        # Recorded before it serves: every recorded query comes after the load it used.
+        self._recording.loaded(Loaded(cell_text, {
+            'cell': cell.name, 'cell_file': str(settings.cell_file),
+            'cell_digest': cell.digest, 'roadmap_hash': roadmap.digest,
+            'roadmap_nodes': str(settings.nodes), 'roadmap_seed': str(roadmap.seed),
+            'roadmap_edges': str(roadmap.edge_count)}, time.time_ns()))
         with self._lock:
             self._cached, self._planner, self._load_failed = cached, planner, False
-        self._send(('markers', markers.roadmap_markers(cell, roadmap, settings.frame_id,
-                                                       self.get_clock().now().to_msg())))
+        roadmap_markers = serialize_message(markers.roadmap_markers(
+            cell, roadmap, settings.frame_id, self.get_clock().now().to_msg()))
+        self._send(('markers', roadmap_markers, 0))
+        self._recording.markers(roadmap_markers)
         self.get_logger().info(
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
@@ -202,12 +239,12 @@ class WaferPlannerNode(Node):
                 logger.info(f'building roadmap: {done}/{total} nodes, {edges} edges')
         return report
 
-    def _plan(self, request, received: float) -> None:
+    def _plan(self, number: int, request, received: float) -> None:
         with self._lock:
             planner, cached, settings = self._planner, self._cached, self.settings
         roadmap = cached.roadmap if cached is not None else None
         if planner is None:
-            self._answer_error(request.request_id, ErrorCode.ROADMAP_NOT_READY,
+            self._answer_error(number, request.request_id, ErrorCode.ROADMAP_NOT_READY,
                                'not ready: the roadmap is being rebuilt', request.start,
                                request.goal)
             return
@@ -219,13 +256,13 @@ class WaferPlannerNode(Node):
             result = planner.plan(request.start, request.goal,
                                   deadline=received + settings.timeout)
         except PlanningError as exc:
-            self._answer_error(request.request_id, exc.code, exc.message, request.start,
+            self._answer_error(number, request.request_id, exc.code, exc.message, request.start,
                                request.goal, (time.monotonic() - begun) * 1000.0, roadmap)
             return
         except Exception as exc:  # noqa: B902 - every request gets its one answer
             self.get_logger().error(f'request {request.request_id}: internal error {exc!r}')
-            self._answer_error(request.request_id, ErrorCode.INTERNAL, f'internal error: {exc!r}',
-                               request.start, request.goal,
+            self._answer_error(number, request.request_id, ErrorCode.INTERNAL,
+                               f'internal error: {exc!r}', request.start, request.goal,
                                (time.monotonic() - begun) * 1000.0, roadmap)
             return
         stamp = self.get_clock().now().to_msg()
@@ -235,20 +272,21 @@ class WaferPlannerNode(Node):
         # The trajectory before its result, so that a client holding the result can rely on
         # the trajectory having been sent; the markers, for people, after both.
         self._send(('trajectory', messages.trajectory(result, request.request_id,
-                                                      planner.cell.robot.joint_names, stamp)),
+                                                      planner.cell.robot.joint_names, stamp),
+                    number),
                    ('result', messages.result_status(
                        request.request_id, level, message,
                        dict(messages.plan_values(result, roadmap, request.start, request.goal),
-                            node_ms=(time.monotonic() - received) * 1000.0))))
+                            node_ms=(time.monotonic() - received) * 1000.0)), number))
         self._send(('path', markers.path_markers(planner.cell, result, settings.frame_id,
-                                                 stamp)))
+                                                 stamp), number))
         with self._lock:
             self._counts['served'] += 1
 
     # ----------------------------------------------------------------- answers out
 
-    def _answer_error(self, request_id, code, message, start, goal, planning_ms=None,
-                      roadmap=None) -> None:
+    def _answer_error(self, number, request_id, code, message, start, goal,
+                      planning_ms=None, roadmap=None) -> None:
         if roadmap is None and self._cached is not None:
             roadmap = self._cached.roadmap
         self.get_logger().warning(f'request {request_id or "(no id)"}: {code.value}: {message}')
@@ -258,7 +296,7 @@ class WaferPlannerNode(Node):
         with self._lock:
             self._counts['failed'] += 1
             self._last_error = f'{request_id}: {code.value}: {message}'
-        self._send(('result', status))
+        self._send(('result', status, number))
 
     def _send(self, *items) -> None:
         """Hand messages to the executor (publishing happens in ``_on_deliver``)."""
@@ -273,8 +311,15 @@ class WaferPlannerNode(Node):
             with self._lock:
                 if not self._outbox:
                     return
-                kind, msg = self._outbox.popleft()
-            publishers[kind].publish(msg)
+                kind, msg, number = self._outbox.popleft()
+            publisher = publishers[kind]
+            if kind in ('trajectory', 'result'):
+                # Recorded first: once a query is answered, a crash cannot lose it.
+                durable = self._recording.record(publisher.topic_name, msg, number,
+                                                 flush=kind == 'result')
+                if durable is not None and not durable.wait(DURABLE_WAIT):
+                    self._late_records += 1
+            publisher.publish(msg)
 
     # ----------------------------------------------------------------- services, health
 
@@ -293,7 +338,8 @@ class WaferPlannerNode(Node):
                 'queue': sum(1 for kind, _ in self._backlog if kind == 'plan'),
                 'served': self._counts['served'], 'failed': self._counts['failed'],
                 'last_error': self._last_error,
-                'recording': False,
+                **self._recording.status(),
+                'answers_before_recorded': self._late_records,
             }
 
     def _on_get_status(self, request, response):
@@ -317,9 +363,38 @@ class WaferPlannerNode(Node):
         return response
 
     def _on_set_recording(self, request, response):
-        response.success = False
-        response.message = 'recording is not available in this version'
+        if request.data:
+            response.success = self._start_recording()
+            response.message = (f'recording to {self._recording.last_directory}'
+                                if response.success else self._recording.last_error)
+        else:
+            directory = self._recording.stop()
+            response.success = True
+            response.message = f'recording closed: {directory}' if directory is not None \
+                else 'not recording'
+            if directory is not None:
+                self.get_logger().info(response.message)
         return response
+
+    def _start_recording(self) -> bool:
+        with self._lock:
+            parent = self.settings.recording_directory
+        try:
+            directory = self._recording.start(parent)
+        except OSError as exc:
+            self.get_logger().error(f'{exc}; planning goes on without recording')
+            return False
+        self.get_logger().info(f'recording to {directory}')
+        return True
+
+    def _recording_failed(self, message: str) -> None:
+        self.get_logger().error(f'{message}; planning goes on without recording')
+
+    def _parameter_values(self, changed: Optional[dict] = None) -> dict:
+        values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS
+                  if self.has_parameter(spec.name)}
+        values.update(changed or {})
+        return values
 
     def _publish_health(self) -> None:
         status = self.status()
@@ -328,7 +403,11 @@ class WaferPlannerNode(Node):
             level = DiagnosticStatus.ERROR
         message = 'ready' if status['ready'] else (
             'loading the roadmap' if status['busy_with'] else status['last_error'])
-        keys = ('ready', 'nodes', 'edges', 'queue', 'served', 'failed', 'recording')
+        if status['recording_error']:
+            level = max(level, DiagnosticStatus.WARN)
+            message += f"; {status['recording_error']}"
+        keys = ('ready', 'nodes', 'edges', 'queue', 'served', 'failed', 'recording',
+                'recording_directory', 'recording_error')
         health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
                                   message=message, hardware_id='wafer_planner',
                                   values=[KeyValue(key=k, value=str(status[k])) for k in keys])
@@ -346,9 +425,15 @@ class WaferPlannerNode(Node):
             settings = settings_from({**current, **changed})
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        if hasattr(self, '_lock'):
+        if hasattr(self, '_recording'):  # not while the parameters are being declared
             with self._lock:
                 self.settings = settings
+            self._recording.parameters(self._parameter_values(changed))
+            if 'recording.enabled' in changed:
+                if settings.recording_enabled:
+                    self._start_recording()
+                else:
+                    self._recording.stop()
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:
@@ -357,6 +442,13 @@ class WaferPlannerNode(Node):
             self._stopping = True
             self._lock.notify_all()
         self._worker.join(timeout=30.0)
+        directory = self._recording.stop()
+        if directory is not None:
+            closed = f'recording closed: {directory}'
+            if self.context.ok():
+                self.get_logger().info(closed)
+            else:  # after Ctrl-C or SIGTERM the logger can no longer reach /rosout
+                print(f'[wafer_planner] {closed}', file=sys.stderr, flush=True)
         super().destroy_node()
 
 

@@ -41,6 +41,17 @@ class RequestError(Exception):
         self.code, self.message, self.request_id = code, message, request_id
 
 
+def request_of(kind: str, message, robot_joints: Sequence[str]) -> Request:
+    """
+    Return the request of a received message: ``kind`` 'station' (``std_msgs/String``) or
+    'joint' (``trajectory_msgs/JointTrajectory``), any object with those fields.
+    """
+    if kind == 'station':
+        return station_request(message.data)
+    return joint_request(message.header.frame_id, message.joint_names,
+                         [point.positions for point in message.points], robot_joints)
+
+
 def joint_request(request_id: str, joint_names: Sequence[str],
                   positions: Sequence[Sequence[float]], robot_joints: Sequence[str]) -> Request:
     """Return the request of a JointTrajectory's id, joint names and points' positions."""

@@ -1,0 +1,121 @@
+"""The node's recording in-process: what it holds, ``~/set_recording``, failures reported."""
+
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from node_harness import Harness, isolate_dds, values, wait_for
+import pytest
+from rclpy.parameter import Parameter
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import get_typestore, Stores
+from std_srvs.srv import SetBool
+
+from wafer_planner_ros.recording.queries import queries
+from wafer_planner_ros.recording.reading import read
+import yaml
+
+
+@pytest.fixture(scope='module')
+def harness(roadmap_cache, tmp_path_factory):
+    """Yield a running, recording node on the default cell."""
+    isolate_dds(tmp_path_factory.mktemp('dds'))
+    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0})
+    yield running
+    running.close()
+
+
+def _stop(harness) -> Path:
+    answer = harness.call('set_recording', SetBool.Request(data=False))
+    assert answer.success and answer.message.startswith('recording closed: '), answer.message
+    return Path(answer.message.split(': ', 1)[1])
+
+
+def _start(harness) -> Path:
+    answer = harness.call('set_recording', SetBool.Request(data=True))
+    assert answer.success, answer.message
+    return Path(answer.message.split('recording to ', 1)[1])
+
+
+def test_set_recording_closes_and_opens_self_contained_bags(harness, default_cell_file):
+    first = Path(harness.status()['recording_directory'])
+    assert harness.status()['recording'] and first.parent == Path(harness.recordings)
+    harness.send_stations({'id': 'r1', 'from': 'loadport1', 'to': 'loadlock1'})
+    harness.result('r1')
+    assert _stop(harness) == first
+    assert (first / 'metadata.yaml').is_file() and not harness.status()['recording']
+    assert 'not recording' in harness.call('set_recording', SetBool.Request(data=False)).message
+    harness.send_stations({'id': 'unrecorded', 'from': 'loadport1', 'to': 'loadlock2'})
+    harness.result('unrecorded')
+    second = _start(harness)
+    assert second != first and harness.status()['recording']
+    harness.send_stations({'id': 'r2', 'from': 'loadport2', 'to': 'loadlock2'})
+    harness.send_stations({'id': 'r3', 'from': 'loadport2', 'to': 'nowhere'})
+    harness.result('r2')
+    harness.result('r3')
+    assert _stop(harness) == second
+    # The second bag alone holds what it needs: cell, parameters, roadmap, markers.
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(second) as reader:
+        topics = {}
+        for connection, _, raw in reader.messages():
+            topics.setdefault(connection.topic, []).append(
+                store.deserialize_cdr(raw, connection.msgtype))
+    assert [m.name for m in topics['/wafer_planner/result']] == ['r2', 'r3']
+    assert [m.header.frame_id for m in topics['/wafer_planner/trajectory']] == ['r2']
+    assert len(topics['/wafer_planner/plan_station_request']) == 2
+    assert len(topics['/wafer_planner/roadmap_markers']) == 1
+    recording = read(second)
+    attachments = {a.name: a.data for a in recording.attachments}
+    assert attachments['cell.yaml'] == default_cell_file.read_bytes()
+    parameters = yaml.safe_load(attachments['parameters.yaml'])['wafer_planner']
+    assert parameters['ros__parameters']['planning.timeout'] == 30.0
+    (load,) = [m.metadata for m in recording.metadata if m.name == 'wafer_planner']
+    assert load['roadmap_hash'] == harness.status()['hash']
+    found = queries(recording)
+    assert [(q.request_id, q.code) for q in found] == [('r2', 'OK'), ('r3', 'UNKNOWN_STATION')]
+    assert found[0].trajectory.positions.shape[1] == 3
+    _start(harness)
+
+
+def test_a_parameter_change_is_recorded_for_the_queries_after_it(harness):
+    node = harness.node
+    assert node.set_parameters([Parameter('trajectory.sample_period', value=0.02)])[0] \
+        .successful
+    harness.send_stations({'id': 'p1', 'from': 'loadport3', 'to': 'loadlock1'})
+    result = harness.result('p1')
+    assert node.set_parameters([Parameter('trajectory.sample_period', value=0.01)])[0] \
+        .successful
+    bag = _stop(harness)
+    _start(harness)
+    (query,) = [q for q in queries(read(bag)) if q.request_id == 'p1']
+    assert query.parameters['trajectory.sample_period'] == 0.02
+    assert query.cycle_time == float(values(result)['cycle_time'])
+    times = query.trajectory.times
+    steps = {round(float(d), 6) for d in times[1:-1] - times[:-2]}
+    assert steps == {0.02}
+
+
+def test_an_unwritable_directory_is_reported_and_planning_goes_on(harness, tmp_path):
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('not a directory')
+    _stop(harness)
+    inbox = []
+    harness.peer.create_subscription(DiagnosticArray, '/diagnostics', inbox.append, 10)
+    node = harness.node
+    moved = Parameter('recording.directory', value=str(blocker / 'recordings'))
+    assert node.set_parameters([moved])[0].successful
+    answer = harness.call('set_recording', SetBool.Request(data=True))
+    assert not answer.success and str(blocker) in answer.message
+    status = harness.status()
+    assert not status['recording'] and str(blocker) in status['recording_error']
+
+    def reported() -> bool:
+        return any(str(blocker) in s.message and s.level == DiagnosticStatus.WARN
+                   for array in inbox for s in array.status)
+    wait_for(reported, 10)
+    harness.send_stations({'id': 'still-planning', 'from': 'loadport1', 'to': 'loadlock1'})
+    assert values(harness.result('still-planning'))['code'] == 'OK'
+    back = Parameter('recording.directory', value=harness.recordings)
+    assert node.set_parameters([back])[0].successful
+    _start(harness)
+    assert harness.status()['recording'] and not harness.status()['recording_error']

@@ -1,0 +1,126 @@
+"""
+Recordings made by the node as its own process, read back by the independent ``rosbags``.
+
+The node is stopped cleanly (SIGINT, SIGTERM) or killed (SIGKILL, then ``wafer-recover``),
+and its recording is replayed offline.
+"""
+
+from collections import Counter, defaultdict
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from node_harness import isolate_dds, Peer, wait_for
+import pytest
+import rclpy
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import get_typestore, Stores
+from sessions import mixed_requests
+
+REQUEST_TOPICS = ('/wafer_planner/plan_station_request', '/wafer_planner/plan_request')
+
+
+def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals):
+    """Run the node, send 50 mixed requests, stop it with ``stop`` after the 50th result."""
+    isolate_dds(tmp_path)
+    recordings = tmp_path / 'recordings'
+    node = subprocess.Popen(
+        [sys.executable, '-m', 'wafer_planner_ros.node.planner_node', '--ros-args',
+         '-p', f'roadmap.cache_dir:={roadmap_cache}', '-p', f'recording.directory:={recordings}',
+         '-p', 'planning.timeout:=60.0', '-p', 'planning.max_queue:=100'],
+        env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    peer = None
+    try:
+        peer = Peer(context)
+        requests = mixed_requests(cell)
+        for kind, message, _ in requests:
+            (peer.station_pub if kind == 'station' else peer.joint_pub).publish(message)
+            time.sleep(0.02)
+        wait_for(lambda: len(peer.results) >= len(requests), 300)
+        node.send_signal(stop)
+        output, _ = node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+            node.communicate()
+        if peer is not None:
+            peer.close()
+        rclpy.try_shutdown(context=context)
+    bags = list(recordings.iterdir())
+    assert len(bags) == 1, bags
+    return bags[0], peer, output, node.returncode
+
+
+def read_with_rosbags(bag) -> dict:
+    """Return every message of the bag, deserialised by rosbags, by topic."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    messages = defaultdict(list)
+    with Reader(bag) as reader:
+        for connection, _, raw in reader.messages():
+            messages[connection.topic].append(store.deserialize_cdr(raw, connection.msgtype))
+    return messages
+
+
+def check_complete(bag, peer, count: int = 50) -> None:
+    """Assert the bag holds every request, result and trajectory the peer saw."""
+    messages = read_with_rosbags(bag)
+    assert sum(len(messages[topic]) for topic in REQUEST_TOPICS) == count
+    results = messages['/wafer_planner/result']
+    assert len(results) == count
+    assert Counter(r.name for r in results) == Counter(r.name for r in peer.results)
+    assert Counter((r.name, r.message) for r in results) == \
+        Counter((r.name, r.message) for r in peer.results)
+    planned = sorted(r.name for r in peer.results if r.level in (b'\x00', b'\x01'))
+    assert len(planned) >= count // 3
+    assert sorted(t.header.frame_id for t in messages['/wafer_planner/trajectory']) == planned
+    recorded = {t.header.frame_id: t for t in messages['/wafer_planner/trajectory']}
+    for sent in peer.trajectories:
+        got = recorded[sent.header.frame_id]
+        assert [list(p.positions) for p in got.points] == \
+            [list(p.positions) for p in sent.points]
+    assert len(messages['/wafer_planner/roadmap_markers']) == 1
+
+
+def replay(bag, roadmap_cache):
+    """Run ``wafer-replay --compare`` on the bag."""
+    return subprocess.run([sys.executable, '-m', 'wafer_planner_ros.cli.replay', str(bag),
+                           '--compare', '--cache-dir', str(roadmap_cache)],
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_a_stopped_node_leaves_a_complete_recording(tmp_path, roadmap_cache, default_cell,
+                                                    stop):
+    bag, peer, output, code = record_session(tmp_path, roadmap_cache, default_cell, stop)
+    assert code == 0, output
+    assert (bag / 'metadata.yaml').is_file()
+    assert 'recording closed' in output
+    check_complete(bag, peer)
+    if stop == signal.SIGINT:
+        replayed = replay(bag, roadmap_cache)
+        assert replayed.returncode == 0, replayed.stdout + replayed.stderr
+        planned = sum(r.level in (b'\x00', b'\x01') for r in peer.results)
+        assert '0 different' in replayed.stdout
+        reproduced = int(replayed.stdout.split('50 queries: ')[1].split()[0])
+        assert reproduced >= planned  # every plan, and the bad requests' errors too
+
+
+def test_a_killed_node_leaves_a_recording_that_recover_completes(tmp_path, roadmap_cache,
+                                                                 default_cell):
+    bag, peer, output, code = record_session(tmp_path, roadmap_cache, default_cell,
+                                             signal.SIGKILL)
+    assert code == -signal.SIGKILL
+    assert not (bag / 'metadata.yaml').exists()
+    with pytest.raises(Exception):  # noqa: B017 - rosbags refuses a cut bag, whatever the kind
+        read_with_rosbags(bag)
+    recovered = subprocess.run([sys.executable, '-m', 'wafer_planner_ros.cli.recover',
+                                str(bag)], capture_output=True, text=True, timeout=300)
+    assert recovered.returncode == 0, recovered.stdout + recovered.stderr
+    assert 'cut off' in recovered.stdout
+    check_complete(bag, peer)
+    replayed = replay(bag, roadmap_cache)
+    assert replayed.returncode == 0, replayed.stdout + replayed.stderr

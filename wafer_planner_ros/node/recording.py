@@ -1,0 +1,151 @@
+"""
+What the node records, and when (SPEC section 6): the adapter between the node and a
+``Recorder``.
+
+Every request is recorded as received (raw bytes, receipt time), every trajectory and
+result as published (the same bytes, publication time), the roadmap markers once per
+roadmap. The MCAP ``sequence`` of a request, of its trajectory and of its result is the
+query number (1, 2, ... per node run), which pairs them however the answers interleave.
+Each roadmap load adds the cell file and the roadmap's identity, and the parameters are
+attached whenever they change (``recording.contents``), so a recording is self-contained.
+ROS-free: the node passes topic names and bytes.
+"""
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+import threading
+import time
+from typing import Callable, Mapping, Optional, Sequence
+
+from wafer_planner_ros.recording.bag import Topic
+from wafer_planner_ros.recording.contents import (CELL_ATTACHMENT, LOAD_METADATA,
+                                                  PARAMETERS_ATTACHMENT, parameters_file)
+from wafer_planner_ros.recording.recorder import bag_name, Recorder
+
+
+@dataclass(frozen=True)
+class Loaded:
+    """What a roadmap load adds to a recording."""
+
+    cell_text: bytes
+    values: Mapping[str, str]
+    """The ``wafer_planner`` metadata record (cell, roadmap hash, nodes, seed, ...)."""
+    loaded_ns: int
+    markers: bytes = b''
+    """The serialised roadmap markers (``markers`` adds them once they are made)."""
+
+
+class NodeRecording:
+    """Start, feed and stop the node's recording; see the module's description."""
+
+    def __init__(self, node_name: str, topics: Sequence[Topic], markers_topic: str,
+                 on_error: Callable[[str], None]):
+        """Remember the topics (``markers_topic`` is one of them); record nothing yet."""
+        self._node_name = node_name
+        self._topics = tuple(topics)
+        self._markers_topic = markers_topic
+        self._on_error = on_error
+        self._lock = threading.Lock()
+        self._recorder: Optional[Recorder] = None
+        self._loaded: Optional[Loaded] = None
+        self._parameters: Optional[bytes] = None
+        self.last_error = ''
+        self.last_directory: Optional[Path] = None
+
+    @property
+    def active(self) -> bool:
+        """Return True while recording (and not failed)."""
+        recorder = self._recorder
+        return recorder is not None and not recorder.error
+
+    def start(self, parent: Path) -> Path:
+        """Start a new bag under ``parent``; return its directory. Raises ``OSError``."""
+        with self._lock:
+            if self._recorder is not None and not self._recorder.error:
+                return self._recorder.directory
+            directory = Path(parent).expanduser() / bag_name(self._node_name)
+            try:
+                recorder = Recorder(directory, self._topics, self._failed)
+            except OSError as exc:
+                self.last_error = f'cannot record to {directory}: {exc.strerror or exc}'
+                raise OSError(self.last_error) from exc
+            self._recorder, self.last_error, self.last_directory = recorder, '', directory
+            if self._parameters is not None:
+                recorder.attach(PARAMETERS_ATTACHMENT, self._parameters, time.time_ns())
+            if self._loaded is not None:
+                self._add_loaded(recorder, self._loaded)
+            recorder.flush()
+            return directory
+
+    def stop(self) -> Optional[Path]:
+        """Close the bag (``metadata.yaml`` written); return its directory, None if none."""
+        with self._lock:
+            recorder, self._recorder = self._recorder, None
+        if recorder is None:
+            return None
+        if recorder.close() is None:
+            self.last_error = recorder.error
+        return recorder.directory
+
+    def record(self, topic: str, data: bytes, number: int,
+               flush: bool = False) -> Optional[threading.Event]:
+        """
+        Record a message now (request, trajectory or result of query ``number``).
+
+        With ``flush``, return the event set once it is safe from a crash (None when not
+        recording).
+        """
+        recorder = self._recorder
+        if recorder is None:
+            return None
+        now = time.time_ns()
+        recorder.record(topic, data, now, now, number)
+        return recorder.flush() if flush else None
+
+    def loaded(self, loaded: Loaded) -> None:
+        """Record a new roadmap before it serves (and keep it for a bag started later)."""
+        with self._lock:
+            self._loaded = loaded
+            if self._recorder is not None:
+                self._add_loaded(self._recorder, loaded)
+
+    def markers(self, data: bytes) -> None:
+        """Record the roadmap markers of the last load."""
+        with self._lock:
+            if self._loaded is None:
+                return
+            self._loaded = replace(self._loaded, markers=data)
+            if self._recorder is not None:
+                now = time.time_ns()
+                self._recorder.record(self._markers_topic, data, now, now, 0)
+                self._recorder.flush()
+
+    def parameters(self, values: Mapping[str, object]) -> None:
+        """Record the node's parameter values (all of them) as they are from now on."""
+        data = parameters_file(self._node_name, values)
+        with self._lock:
+            self._parameters = data
+            if self._recorder is not None:
+                self._recorder.attach(PARAMETERS_ATTACHMENT, data, time.time_ns())
+
+    def status(self) -> dict:
+        """Return the recording's state (for ``~/get_status`` and ``/diagnostics``)."""
+        recorder = self._recorder
+        if recorder is None:
+            return {'recording': False, 'recording_directory': str(self.last_directory or ''),
+                    'recording_error': self.last_error}
+        state = recorder.status()
+        return {'recording': not state['error'], 'recording_directory': state['directory'],
+                'recording_error': state['error'], 'recorded': state['written'],
+                'recording_dropped': state['dropped']}
+
+    def _add_loaded(self, recorder: Recorder, loaded: Loaded) -> None:
+        recorder.attach(CELL_ATTACHMENT, loaded.cell_text, loaded.loaded_ns)
+        recorder.metadata(LOAD_METADATA, dict(loaded.values, loaded_ns=str(loaded.loaded_ns)))
+        if loaded.markers:
+            now = time.time_ns()
+            recorder.record(self._markers_topic, loaded.markers, now, now, 0)
+
+    def _failed(self, message: str) -> None:
+        self.last_error = message
+        self._on_error(message)

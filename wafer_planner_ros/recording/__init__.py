@@ -1,0 +1,1 @@
+"""Recording queries to MCAP in the rosbag2 layout, and reading them back (SPEC section 6)."""
