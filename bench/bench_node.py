@@ -3,9 +3,11 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
 
 1. End-to-end latency, one request at a time (every directed station pair three times and
    50 random free joint requests): request publish to result receipt, against the planning
-   time the node itself reports (the core planner's ``timings_ms['total']``).
-2. A burst of 200 station requests from 4 publishers at once: every result received, none
-   lost or duplicated, how many were BUSY, and ``~/get_status`` round trips throughout.
+   time the node itself reports (the core planner's ``timings_ms['total']``). Run four
+   times, recording on, off, on, off (``~/set_recording``), to show what recording costs.
+2. A burst of 200 station requests from 4 publishers at once, recording on: every result
+   received, none lost or duplicated, how many were BUSY, ``~/get_status`` round trips
+   throughout, and every request and result in the recording.
 3. The node's resident memory.
 Prints a table; writes ``bench/results/node.json``. Usage: ``make bench`` or
 ``python bench/bench_node.py``.
@@ -18,6 +20,7 @@ from pathlib import Path
 import platform
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 
@@ -28,12 +31,13 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
+from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from wafer_planner_ros.cell import Cell, default_cell_path
 from wafer_planner_ros.cli.plan import station_pairs
 from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.recording.reading import read
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'node.json'
 BURST, PUBLISHERS = 200, 4
@@ -55,6 +59,16 @@ class Peer(Node):
         self.joints = self.create_publisher(JointTrajectory, '/wafer_planner/plan_request',
                                             RELIABLE)
         self.status = self.create_client(Trigger, '/wafer_planner/get_status')
+        self.recording = self.create_client(SetBool, '/wafer_planner/set_recording')
+
+    def set_recording(self, on: bool) -> str:
+        """Switch the node's recording on or off; return its answer."""
+        future = self.recording.call_async(SetBool.Request(data=on))
+        while not future.done():
+            time.sleep(0.001)
+        if not future.result().success:
+            raise RuntimeError(future.result().message)
+        return future.result().message
 
     def on_result(self, msg: DiagnosticStatus) -> None:
         """Keep the first result per id; count any second one."""
@@ -89,9 +103,11 @@ def main() -> int:
                ROS_DOMAIN_ID=str(150 + os.getpid() % 50))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                       ROS_DOMAIN_ID=env['ROS_DOMAIN_ID'])
+    recordings = tempfile.mkdtemp(prefix='bench_recordings_')
     node = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.planner_node',
                              '--ros-args', '-p', 'planning.timeout:=60.0',
-                             '-p', f'planning.max_queue:={BURST + 10}'],
+                             '-p', f'planning.max_queue:={BURST + 10}',
+                             '-p', f'recording.directory:={recordings}'],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     rclpy.init()
     peer = Peer()
@@ -102,6 +118,8 @@ def main() -> int:
     try:
         report = run(peer)
         report['node_memory_mb'] = _memory(node.pid)
+        peer.set_recording(False)
+        report['burst']['recorded'] = _recorded(report.pop('burst_bag'))
     finally:
         executor.shutdown()
         peer.destroy_node()
@@ -123,6 +141,13 @@ def main() -> int:
           f" s; get_status {burst['status_ms']['n']} calls: median "
           f"{burst['status_ms']['median']:.2f} ms, max {burst['status_ms']['max']:.2f} ms; "
           f"slowest (ms, s into the burst): {burst['slowest_status']}")
+    rec = report['recording']
+    print(f"recording on vs off: end-to-end median {rec['on']['e2e_ms']['median']:.2f} vs "
+          f"{rec['off']['e2e_ms']['median']:.2f} ms, overhead median "
+          f"{rec['on']['overhead_ms']['median']:.2f} vs "
+          f"{rec['off']['overhead_ms']['median']:.2f} ms "
+          f"(difference {rec['overhead_median_difference_ms']:+.2f} ms)")
+    print(f"burst recorded: {burst['recorded']}")
     print(f"node memory: {report['node_memory_mb']}")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(report, indent=1) + '\n')
@@ -147,31 +172,19 @@ def run(peer: Peer) -> dict:
         time.sleep(0.05)
     cell = Cell.from_yaml(default_cell_path())
     pairs = station_pairs(cell)
-    e2e, planner, in_node = [], [], []
-    for k, (a, b) in enumerate(pairs * 3):
-        started = time.perf_counter()
-        peer.stations[0].publish(String(data=json.dumps({'id': f's{k}', 'from': a, 'to': b})))
-        received, values = peer.wait(f's{k}')
-        e2e.append((received - started) * 1000.0)
-        planner.append(float(values['planning_time_ms']))
-        in_node.append(float(values['node_ms']))
-    for k, (a, b) in enumerate(random_pairs(cell, 50)):
-        msg = JointTrajectory()
-        msg.header.frame_id = f'j{k}'
-        msg.points = [JointTrajectoryPoint(positions=a.tolist()),
-                      JointTrajectoryPoint(positions=b.tolist())]
-        started = time.perf_counter()
-        peer.joints.publish(msg)
-        received, values = peer.wait(f'j{k}')
-        if 'planning_time_ms' in values:
-            e2e.append((received - started) * 1000.0)
-            planner.append(float(values['planning_time_ms']))
-            in_node.append(float(values['node_ms']))
-    e2e, planner, in_node = np.array(e2e), np.array(planner), np.array(in_node)
-    sequential = {'requests': len(e2e), 'e2e_ms': _stats(e2e), 'planner_ms': _stats(planner),
-                  'overhead_ms': _stats(e2e - planner),
-                  'in_node_overhead_ms': _stats(in_node - planner),
-                  'transport_ms': _stats(e2e - in_node)}
+    joints = random_pairs(cell, 50)
+    passes = {True: [], False: []}
+    for p, on in enumerate((True, False, True, False)):
+        if not on or p > 0:
+            peer.set_recording(on)
+        passes[on].append(_sequential(peer, pairs, joints, f'p{p}-'))
+    on, off = (_merged(passes[mode]) for mode in (True, False))
+    sequential = on  # the node as deployed: recording on
+    recording = {'on': on, 'off': off, 'passes': 2,
+                 'e2e_median_difference_ms': on['e2e_ms']['median'] - off['e2e_ms']['median'],
+                 'overhead_median_difference_ms':
+                     on['overhead_ms']['median'] - off['overhead_ms']['median']}
+    burst_bag = peer.set_recording(True).split('recording to ', 1)[1]
     # The burst: 4 publishers at once, get_status polled throughout.
     ids = [[f'b{p}-{k}' for k in range(BURST // PUBLISHERS)] for p in range(PUBLISHERS)]
     status_ms, status_at, done = [], [], threading.Event()
@@ -213,7 +226,48 @@ def run(peer: Peer) -> dict:
              'slowest_status': sorted(([round(ms, 1), round(at, 2)] for ms, at
                                        in zip(status_ms, status_at)), reverse=True)[:5]}
     return {'benchmark': 'wafer_planner_node over DDS on loopback, default cell',
-            'sequential': sequential, 'burst': burst}
+            'sequential': sequential, 'recording': recording, 'burst': burst,
+            'burst_bag': burst_bag}
+
+
+def _sequential(peer: Peer, pairs, joints, prefix: str) -> dict:
+    """Ask every station pair three times and every joint pair once, one at a time."""
+    e2e, planner, in_node = [], [], []
+
+    def ask(request_id: str, send) -> None:
+        started = time.perf_counter()
+        send()
+        received, values = peer.wait(request_id)
+        if 'planning_time_ms' in values and values['code'] == 'OK':
+            e2e.append((received - started) * 1000.0)
+            planner.append(float(values['planning_time_ms']))
+            in_node.append(float(values['node_ms']))
+    for k, (a, b) in enumerate(pairs * 3):
+        request = json.dumps({'id': f'{prefix}s{k}', 'from': a, 'to': b})
+        ask(f'{prefix}s{k}', lambda: peer.stations[0].publish(String(data=request)))
+    for k, (a, b) in enumerate(joints):
+        msg = JointTrajectory()
+        msg.header.frame_id = f'{prefix}j{k}'
+        msg.points = [JointTrajectoryPoint(positions=a.tolist()),
+                      JointTrajectoryPoint(positions=b.tolist())]
+        ask(f'{prefix}j{k}', lambda: peer.joints.publish(msg))
+    return {'e2e': e2e, 'planner': planner, 'in_node': in_node}
+
+
+def _merged(passes) -> dict:
+    """Return the statistics of several passes of ``_sequential`` together."""
+    e2e, planner, in_node = (np.concatenate([p[key] for p in passes])
+                             for key in ('e2e', 'planner', 'in_node'))
+    return {'requests': len(e2e), 'e2e_ms': _stats(e2e), 'planner_ms': _stats(planner),
+            'overhead_ms': _stats(e2e - planner),
+            'in_node_overhead_ms': _stats(in_node - planner),
+            'transport_ms': _stats(e2e - in_node)}
+
+
+def _recorded(bag: str) -> dict:
+    """Return what the burst's recording holds, by topic."""
+    recording = read(bag)
+    return {'complete': recording.complete, 'messages': recording.counts()}
 
 
 def _memory(pid: int) -> dict:

@@ -46,3 +46,13 @@ def roadmap(cell, roadmap_cache):
 def default_roadmap(default_cell, roadmap_cache):
     """Return the default-settings roadmap of the default cell."""
     return load_or_build(default_cell, cache_dir=roadmap_cache).roadmap
+
+
+@pytest.fixture(scope='module')
+def harness(roadmap_cache, tmp_path_factory):
+    """Yield a running node on the default cell (roadmap from the session cache), per module."""
+    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
+    isolate_dds(tmp_path_factory.mktemp('dds'))
+    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0})
+    yield running
+    running.close()

@@ -2,7 +2,7 @@
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from independent import check
-from node_harness import Harness, isolate_dds, values, wait_for
+from node_harness import values, wait_for
 import numpy as np
 import pytest
 import rclpy
@@ -12,15 +12,6 @@ from std_msgs.msg import String
 from wafer_planner_ros.cache import load_or_build
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.report import plan_json, roadmap_json
-
-
-@pytest.fixture(scope='module')
-def harness(roadmap_cache, tmp_path_factory):
-    """Yield a running node on the default cell (roadmap from the session cache)."""
-    isolate_dds(tmp_path_factory.mktemp('dds'))
-    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0})
-    yield running
-    running.close()
 
 
 def test_station_request_publishes_the_core_planners_trajectory(harness, default_cell,

@@ -3,8 +3,7 @@
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from node_harness import Harness, isolate_dds, values, wait_for
-import pytest
+from node_harness import values, wait_for
 from rclpy.parameter import Parameter
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
@@ -13,15 +12,6 @@ from std_srvs.srv import SetBool
 from wafer_planner_ros.recording.queries import queries
 from wafer_planner_ros.recording.reading import read
 import yaml
-
-
-@pytest.fixture(scope='module')
-def harness(roadmap_cache, tmp_path_factory):
-    """Yield a running, recording node on the default cell."""
-    isolate_dds(tmp_path_factory.mktemp('dds'))
-    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0})
-    yield running
-    running.close()
 
 
 def _stop(harness) -> Path:
@@ -119,3 +109,13 @@ def test_an_unwritable_directory_is_reported_and_planning_goes_on(harness, tmp_p
     assert node.set_parameters([back])[0].successful
     _start(harness)
     assert harness.status()['recording'] and not harness.status()['recording_error']
+
+
+def test_the_enabled_parameter_closes_and_starts_recordings(harness):
+    before = Path(harness.status()['recording_directory'])
+    node = harness.node
+    assert node.set_parameters([Parameter('recording.enabled', value=False)])[0].successful
+    assert not harness.status()['recording'] and (before / 'metadata.yaml').is_file()
+    assert node.set_parameters([Parameter('recording.enabled', value=True)])[0].successful
+    after = Path(harness.status()['recording_directory'])
+    assert harness.status()['recording'] and after != before

@@ -107,6 +107,13 @@ def test_a_stopped_node_leaves_a_complete_recording(tmp_path, roadmap_cache, def
         assert '0 different' in replayed.stdout
         reproduced = int(replayed.stdout.split('50 queries: ')[1].split()[0])
         assert reproduced >= planned  # every plan, and the bad requests' errors too
+        review = subprocess.run([sys.executable, '-m', 'wafer_planner_ros.cli.review',
+                                 str(bag), '--out', str(tmp_path / 'review'), '--dpi', '30'],
+                                capture_output=True, text=True, timeout=600)
+        assert review.returncode == 0, review.stdout + review.stderr
+        assert len(list((tmp_path / 'review').glob('query_*.png'))) == 50
+        index = (tmp_path / 'review' / 'index.html').read_text()
+        assert all(f'>{r.name}<' in index for r in peer.results if r.name)
 
 
 def test_a_killed_node_leaves_a_recording_that_recover_completes(tmp_path, roadmap_cache,

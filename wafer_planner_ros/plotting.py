@@ -1,15 +1,25 @@
-"""Figures: the enclosure with the robot, and the roadmap in joint space (paper Figs. 4-5)."""
+"""
+Figures of the cell, the roadmap and the motions.
+
+The enclosure with the robot and the roadmap in joint space (paper Figs. 4-5); a motion
+with its joint and wafer profiles against the limits (Figs. 10-13).
+"""
+
+import textwrap
 
 import matplotlib
 
 matplotlib.use('Agg')
 
-import matplotlib.pyplot as plt  # noqa: E402, I100 - the backend must be chosen first
+from matplotlib.collections import LineCollection  # noqa: E402, I100 - backend first
+from matplotlib.lines import Line2D  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wafer_planner_ros.roadmap import SAMPLER_NAMES  # noqa: E402
 
 _SAMPLER_COLOURS = ('tab:blue', 'tab:orange', 'tab:green')
+_ANGLES = np.linspace(0.0, 2.0 * np.pi, 64)
 
 
 def capsule_outline(a: np.ndarray, b: np.ndarray, radius: float, n: int = 16) -> np.ndarray:
@@ -36,16 +46,26 @@ def draw_cell(ax, cell) -> None:
 
 def draw_robot(ax, robot, q: np.ndarray, colour='tab:blue', alpha=1.0, wafer=True) -> None:
     """Draw the link capsules and the wafer of the robot at configuration q."""
-    points = robot.arm.joint_points(np.asarray(q, float))
-    for k in range(3):
-        outline = capsule_outline(points[k], points[k + 1], robot.link_radii[k])
-        ax.plot(outline[:, 0], outline[:, 1], color=colour, alpha=alpha, linewidth=1)
-    if wafer:
-        angle = np.linspace(0.0, 2.0 * np.pi, 64)
-        centre = points[3]
-        ax.plot(centre[0] + robot.wafer_radius * np.cos(angle),
-                centre[1] + robot.wafer_radius * np.sin(angle),
-                color=colour, alpha=alpha, linewidth=1, linestyle='--')
+    draw_robots(ax, robot, [q], [colour], alpha, wafer)
+
+
+def draw_robots(ax, robot, configurations, colours, alpha=1.0, wafer=True) -> None:
+    """Draw the robot at each configuration in its colour (two collections: quick to draw)."""
+    links, link_colours, wafers, wafer_colours = [], [], [], []
+    circle = robot.wafer_radius * np.column_stack([np.cos(_ANGLES), np.sin(_ANGLES)])
+    for q, colour in zip(configurations, colours):
+        points = robot.arm.joint_points(np.asarray(q, float))
+        links += [capsule_outline(points[k], points[k + 1], robot.link_radii[k])
+                  for k in range(3)]
+        link_colours += [colour] * 3
+        if wafer:
+            wafers.append(points[3] + circle)
+            wafer_colours.append(colour)
+    ax.add_collection(LineCollection(links, colors=link_colours, alpha=alpha, linewidths=1))
+    if wafers:
+        ax.add_collection(LineCollection(wafers, colors=wafer_colours, alpha=alpha,
+                                         linewidths=1, linestyles='--'))
+    ax.autoscale_view()
 
 
 def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> None:
@@ -85,50 +105,148 @@ def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> N
 
 def plot_trajectory(cell, result, path, outlines: int = 14) -> None:
     """Write a PNG of a plan like the paper's Figs. 10-13: motion, joints, wafer."""
-    robot, spline = cell.robot, result.spline
+    spline = result.spline
     t = np.linspace(0.0, spline.duration, 1500)
     q, qd, qdd = spline.evaluate_orders(t)
-    wafer = robot.arm.wafer_acceleration(q, qd, qdd)
+    plot_motion(cell, t, q, qd, qdd,
+                f'{result.start.label} -> {result.goal.label}: cycle time '
+                f'{result.cycle_time:.3f} s (λ-scaled {result.initial_cycle_time:.3f} s), '
+                f'branches {list(result.branches)}', path, outlines)
+
+
+def plot_motion(cell, times, q, qd, qdd, title: str, path, outlines: int = 14,
+                dpi: int = 100) -> None:
+    """
+    Write a PNG of a sampled motion like the paper's Figs. 10-13.
+
+    The enclosure with the robot's outline at ``outlines`` instants and the wafer-centre
+    trace; joint position, velocity and acceleration against their limits; the wafer
+    acceleration along x and y against its limit. ``times`` (N,) s; ``q``, ``qd``, ``qdd``
+    (N, J) in the robot's joint order. ``title`` is shown as it is (no mathtext).
+    """
+    robot = cell.robot
+    times = np.asarray(times, float)
+    q, qd, qdd = (np.asarray(values, float) for values in (q, qd, qdd))
     fig = plt.figure(figsize=(16, 9))
-    grid = fig.add_gridspec(3, 3)
+    grid = fig.add_gridspec(3, 3, left=0.05, right=0.985, bottom=0.06, top=0.93,
+                            hspace=0.32, wspace=0.2)
     ax = fig.add_subplot(grid[:2, :2])
+    _draw_motion(ax, cell, times, q, outlines)
+    ax.set_title(_wrapped(title, 120, most=3), parse_math=False)
+    _draw_joints(fig, grid, robot, times, (q, qd, qdd))
+    _draw_wafer(fig.add_subplot(grid[2, :2]), robot, times,
+                robot.arm.wafer_acceleration(q, qd, qdd))
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def plot_ends(cell, start, goal, title: str, path, dpi: int = 100) -> None:
+    """
+    Write a PNG of the enclosure with the robot at ``start`` and ``goal`` (None: unknown).
+
+    For a query that has no motion (a refused request); ``title`` (shown as it is, its lines
+    wrapped) says why. The stations are marked at their wafer centres.
+    """
+    fig = plt.figure(figsize=(11, 7))
+    ax = fig.add_axes((0.08, 0.08, 0.9, 0.78))
+    draw_cell(ax, cell)
+    for name, station in sorted(cell.stations.items()):
+        centre = cell.robot.arm.wafer_center(station.configs[0].q)
+        ax.plot(*centre, marker='x', color='0.5', markersize=6)
+        ax.annotate(name, centre, xytext=(4, 4), textcoords='offset points', fontsize=8,
+                    color='0.4')
+    handles = []
+    for q, colour, role in ((start, 'tab:blue', 'start'), (goal, 'tab:orange', 'goal')):
+        if q is None:
+            handles.append(Line2D([], [], linestyle='', label=f'{role}: unknown'))
+            continue
+        draw_robot(ax, cell.robot, q, colour=colour)
+        ax.plot(*cell.robot.arm.wafer_center(np.asarray(q, float)), marker='o', color=colour,
+                markersize=5)
+        handles.append(Line2D([], [], color=colour, label=f'robot at {role}'))
+    ax.legend(handles=handles, loc='upper right')
+    fig.suptitle(_wrapped(title, 110), parse_math=False, fontsize=11)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def _draw_motion(ax, cell, times, q, outlines: int) -> None:
+    robot = cell.robot
     draw_cell(ax, cell)
     colours = plt.get_cmap('viridis')
-    for k, tk in enumerate(np.linspace(0.0, spline.duration, outlines)):
-        draw_robot(ax, robot, spline.evaluate(tk)[0], colour=colours(k / (outlines - 1)),
-                   alpha=0.55)
+    instants = np.linspace(times[0], times[-1], outlines)
+    shown = np.column_stack([np.interp(instants, times, q[:, j]) for j in range(q.shape[1])])
+    draw_robots(ax, robot, shown, colours(np.linspace(0.0, 1.0, outlines)), alpha=0.55)
     centre = robot.arm.wafer_center(q)
     ax.plot(centre[:, 0], centre[:, 1], color='tab:red', linewidth=2, label='wafer centre')
+    ax.plot(*centre[0], marker='o', color=colours(0.0), markersize=8, linestyle='',
+            label=f'start (t = {times[0]:.2f} s)')
+    ax.plot(*centre[-1], marker='s', color=colours(1.0), markersize=8, linestyle='',
+            label=f'goal (t = {times[-1]:.2f} s)')
     ax.legend(loc='upper right')
-    ax.set_title(f'{result.start.label} -> {result.goal.label}: cycle time '
-                 f'{result.cycle_time:.3f} s (λ-scaled {result.initial_cycle_time:.3f} s), '
-                 f'branches {list(result.branches)}')
-    panels = [(grid[0, 2], q, None, 'position (rad)'),
-              (grid[1, 2], qd, robot.limits.velocity, 'velocity (rad/s)'),
-              (grid[2, 2], qdd, robot.limits.acceleration, 'acceleration (rad/s²)')]
-    for spec, values, limit, label in panels:
-        axis = fig.add_subplot(spec)
+
+
+def _draw_joints(fig, grid, robot, times, series) -> None:
+    lower, upper = robot.limits.position.T
+    panels = [('position (rad)', lower, upper),
+              ('velocity (rad/s)', -robot.limits.velocity, robot.limits.velocity),
+              ('acceleration (rad/s²)', -robot.limits.acceleration, robot.limits.acceleration)]
+    for row, (values, (label, low, high)) in enumerate(zip(series, panels)):
+        axis = fig.add_subplot(grid[row, 2])
+        handles = []
         for j, name in enumerate(robot.joint_names):
-            line, = axis.plot(t, values[:, j], label=name)
-            if limit is not None:
-                axis.axhline(limit[j], color=line.get_color(), linestyle='--', linewidth=0.8)
-                axis.axhline(-limit[j], color=line.get_color(), linestyle='--', linewidth=0.8)
+            line, = axis.plot(times, values[:, j], label=name)
+            handles.append(line)
+            for bound in (low[j], high[j]):
+                axis.axhline(bound, color=line.get_color(), linestyle='--', linewidth=0.8)
+        if row:
+            axis.text(0.01, 0.97, f'peak {_peak(np.abs(values) / high):.1%} of limit',
+                      transform=axis.transAxes, ha='left', va='top', fontsize=8,
+                      bbox={'facecolor': 'white', 'edgecolor': 'none', 'pad': 1.5})
+        else:
+            _legend_above(axis, handles)
         axis.set_ylabel(label)
-        axis.legend(fontsize=7, loc='upper right')
+        axis.grid(alpha=0.3)
     axis.set_xlabel('t (s)')
-    wafer_axis = fig.add_subplot(grid[2, :2])
+
+
+def _draw_wafer(axis, robot, times, wafer) -> None:
+    handles = []
     for k, name in enumerate('xy'):
-        line, = wafer_axis.plot(t, wafer[:, k], label=f'a_{name}')
         limit = robot.wafer_acceleration_limit[k]
-        wafer_axis.axhline(limit, color=line.get_color(), linestyle='--', linewidth=0.8)
-        wafer_axis.axhline(-limit, color=line.get_color(), linestyle='--', linewidth=0.8)
-    if robot.wafer_acceleration_norm_limit is not None:
-        wafer_axis.plot(t, np.hypot(wafer[:, 0], wafer[:, 1]), color='black', label='|a|')
-        wafer_axis.axhline(robot.wafer_acceleration_norm_limit, color='black', linestyle='--',
-                           linewidth=0.8)
-    wafer_axis.set_ylabel('wafer acceleration (m/s²)')
-    wafer_axis.set_xlabel('t (s)')
-    wafer_axis.legend(fontsize=8, loc='upper right')
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+        line, = axis.plot(times, wafer[:, k],
+                          label=f'a_{name} (peak {_peak(np.abs(wafer[:, k]) / limit):.1%})')
+        handles.append(line)
+        axis.axhline(limit, color=line.get_color(), linestyle='--', linewidth=0.8)
+        axis.axhline(-limit, color=line.get_color(), linestyle='--', linewidth=0.8)
+    norm_limit = robot.wafer_acceleration_norm_limit
+    if norm_limit is not None:
+        norm = np.hypot(wafer[:, 0], wafer[:, 1])
+        handles += axis.plot(times, norm, color='black',
+                             label=f'|a| (peak {_peak(norm / norm_limit):.1%})')
+        axis.axhline(norm_limit, color='black', linestyle='--', linewidth=0.8)
+    axis.set_ylabel('wafer acceleration (m/s²)')
+    axis.set_xlabel('t (s)')
+    axis.grid(alpha=0.3)
+    _legend_above(axis, handles)
+
+
+def _legend_above(axis, handles) -> None:
+    """Put the legend (the curves, then 'limit') in one row above the axes' right end."""
+    limit = Line2D([], [], color='0.3', linestyle='--', linewidth=0.8, label='limit')
+    axis.legend(handles=handles + [limit], fontsize=8, ncol=len(handles) + 1,
+                loc='lower right', bbox_to_anchor=(1.0, 1.0), frameon=False,
+                borderaxespad=0.2)
+
+
+def _wrapped(title: str, width: int, most: int = 6) -> str:
+    """Return ``title`` with each line wrapped to ``width`` characters, ``most`` lines."""
+    lines = [part for line in title.split('\n') for part in textwrap.wrap(line, width) or ['']]
+    if len(lines) > most:
+        lines = lines[:most - 1] + [lines[most - 1][:width - 1] + '…']
+    return '\n'.join(lines)
+
+
+def _peak(ratios: np.ndarray) -> float:
+    """Return the largest of ``ratios`` (0 for none)."""
+    return float(np.max(ratios)) if np.size(ratios) else 0.0

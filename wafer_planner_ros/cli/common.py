@@ -1,4 +1,4 @@
-"""What the command-line tools share: cell and roadmap options, progress, JSON output."""
+"""What the command-line tools share: cell and roadmap options, progress, recordings, JSON."""
 
 import argparse
 import json
@@ -8,6 +8,8 @@ import sys
 from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.cell import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError, WaferPlannerError
+from wafer_planner_ros.recording.queries import queries
+from wafer_planner_ros.recording.reading import read
 from wafer_planner_ros.roadmap import RoadmapSettings
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
@@ -92,6 +94,23 @@ class Progress:
         if self.shown and self.tty:
             self.stream.write('\n')
             self.stream.flush()
+
+
+def recorded_queries(bag: str, doing: str) -> tuple:
+    """
+    Return (recording, its queries) of a bag for a tool that is ``doing`` something with it.
+
+    A recording cut off by a crash is read up to the cut, with a warning on stderr; one
+    without requests is a UsageError.
+    """
+    recording = read(bag)
+    if not recording.complete:
+        print(f'warning: {recording.path} was cut off ({recording.cut}); {doing} what was '
+              'written before (wafer-recover makes it complete)', file=sys.stderr)
+    found = queries(recording)
+    if not found:
+        raise UsageError(f'{bag}: the recording holds no requests')
+    return recording, found
 
 
 def write_json(data, destination: str) -> None:

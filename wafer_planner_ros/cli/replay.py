@@ -14,18 +14,16 @@ from dataclasses import dataclass
 import sys
 from typing import List, Optional
 
-import yaml
-
 from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.cell import Cell
-from wafer_planner_ros.cli.common import (EXIT_FAILURE, EXIT_OK, Progress, run, UsageError,
-                                          write_json)
+from wafer_planner_ros.cli.common import (EXIT_FAILURE, EXIT_OK, Progress, recorded_queries,
+                                          run, UsageError, write_json)
 from wafer_planner_ros.errors import CellError, PlanningError
 from wafer_planner_ros.node.requests import request_of, RequestError
 from wafer_planner_ros.planner import Planner, PlannerSettings
-from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, queries, Query, short_label
-from wafer_planner_ros.recording.reading import read
+from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query, short_label
 from wafer_planner_ros.roadmap import RoadmapSettings
+import yaml  # after the package: ament_flake8 takes wafer_planner_ros for a third party
 
 OK = 'OK'
 """The code of a planned query (``node.messages.plan_values``)."""
@@ -189,13 +187,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if not args.tolerance >= 0:
         raise UsageError(f'--tolerance must be >= 0, got {args.tolerance}')
-    recording = read(args.bag)
-    if not recording.complete:
-        print(f'warning: {recording.path} was cut off ({recording.cut}); replaying what was '
-              'written before (wafer-recover makes it complete)', file=sys.stderr)
-    found = queries(recording)
-    if not found:
-        raise UsageError(f'{args.bag}: the recording holds no requests')
+    _, found = recorded_queries(args.bag, 'replaying')
     if args.publish:
         from wafer_planner_ros.node.replay_publish import publish
         rows = publish(found, args.node, args.timeout, args.tolerance)

@@ -8,9 +8,8 @@ import numpy as np
 
 from wafer_planner_ros.node import cdr
 
-LEVELS = {name: ord(level) for name, level in (('ok', DiagnosticStatus.OK),
-                                                ('warn', DiagnosticStatus.WARN),
-                                                ('error', DiagnosticStatus.ERROR))}
+LEVELS = {'ok': ord(DiagnosticStatus.OK), 'warn': ord(DiagnosticStatus.WARN),
+          'error': ord(DiagnosticStatus.ERROR)}
 
 
 def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> bytes:

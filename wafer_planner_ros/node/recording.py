@@ -1,6 +1,5 @@
 """
-What the node records, and when (SPEC section 6): the adapter between the node and a
-``Recorder``.
+What the node records, and when (SPEC section 6): the node's side of a ``Recorder``.
 
 Every request is recorded as received (raw bytes, receipt time), every trajectory and
 result as published (the same bytes, publication time), the roadmap markers once per

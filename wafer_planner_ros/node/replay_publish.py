@@ -1,6 +1,7 @@
 """
-``wafer-replay BAG --publish``: send a recording's requests to a running node, at their
-recorded pace, and compare its answers with the recorded ones.
+``wafer-replay BAG --publish``: send a recording's requests to a running node.
+
+They go at their recorded pace, and the node's answers are compared with the recorded ones.
 
 The requests go out as their recorded bytes, on their recorded topics (or those of
 ``--node``). Answers are paired with requests by id, in order (several requests may share

@@ -43,8 +43,10 @@ class RequestError(Exception):
 
 def request_of(kind: str, message, robot_joints: Sequence[str]) -> Request:
     """
-    Return the request of a received message: ``kind`` 'station' (``std_msgs/String``) or
-    'joint' (``trajectory_msgs/JointTrajectory``), any object with those fields.
+    Return the request of a received message.
+
+    ``kind`` is 'station' (``std_msgs/String``) or 'joint' (``trajectory_msgs/
+    JointTrajectory``); ``message`` is any object with those fields.
     """
     if kind == 'station':
         return station_request(message.data)

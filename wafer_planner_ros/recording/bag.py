@@ -15,10 +15,9 @@ from pathlib import Path
 from typing import Dict, Iterable, Mapping, Optional, Sequence
 
 from mcap.writer import CompressionType, Writer
-import yaml
-
 from wafer_planner_ros import __version__
 from wafer_planner_ros.recording import msgdefs
+import yaml  # after the package: ament_flake8 takes wafer_planner_ros for a third party
 
 METADATA_FILE = 'metadata.yaml'
 ROS_DISTRO = 'jazzy'
@@ -41,12 +40,12 @@ class Topic:
     """A recorded topic: its name, message type (``pkg/msg/Type``) and offered QoS."""
 
     name: str
-    type: str
+    type: str  # noqa: A003 - rosbag2's name for it
     qos: Mapping = field(default_factory=qos)
     type_hash: str = ''
     """``RIHS01_...``; empty: looked up from the installed message package."""
 
-    def hash(self) -> str:
+    def hash(self) -> str:  # noqa: A003 - the hash of the type, as rosbag2 calls it
         """Return the type's ``RIHS01_`` hash."""
         return self.type_hash or msgdefs.type_hash(self.type)
 

@@ -2,7 +2,7 @@
 The queries of a recording: each request with its result, trajectory and context.
 
 A request, its trajectory and its result share the MCAP ``sequence`` (the query number, see
-``node.recording``). The context of a query (``contents``) is what was in force when it arrived: the last
+``contents``). The context of a query is what was in force when it arrived: the last
 roadmap load before it (cell file, roadmap hash, nodes, seed) and the last parameters. The
 messages are decoded from the schemas stored in the recording itself (``mcap_ros2``), so no
 ROS installation is needed to read them.
@@ -80,7 +80,7 @@ class Query:
 
     @property
     def code(self) -> str:
-        """Return the recorded answer's code ('' when no answer was recorded)."""
+        """Return the code of the recorded answer ('' when no answer was recorded)."""
         return self.result.values.get('code', '') if self.result is not None else ''
 
     @property
