@@ -3,8 +3,10 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
 
 1. End-to-end latency, one request at a time (every directed station pair three times and
    50 random free joint requests): request publish to result receipt, against the planning
-   time the node itself reports (the core planner's ``timings_ms['total']``). Run four
-   times, recording on, off, on, off (``~/set_recording``), to show what recording costs.
+   time the node itself reports (the core planner's ``timings_ms['total']``). After a
+   warm-up pass, every request is asked twice with recording on and twice off
+   (``~/set_recording``, in turns block by block); what recording costs is the median over
+   requests of (on - off) for the same request.
 2. A burst of 200 station requests from 4 publishers at once, recording on: every result
    received, none lost or duplicated, how many were BUSY, ``~/get_status`` round trips
    throughout, and every request and result in the recording.
@@ -41,6 +43,8 @@ from wafer_planner_ros.recording.reading import read
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'node.json'
 BURST, PUBLISHERS = 200, 4
+BLOCK = 12
+"""Requests asked in one go with recording on, then off (or off, then on)."""
 
 
 class Peer(Node):
@@ -142,11 +146,14 @@ def main() -> int:
           f"{burst['status_ms']['median']:.2f} ms, max {burst['status_ms']['max']:.2f} ms; "
           f"slowest (ms, s into the burst): {burst['slowest_status']}")
     rec = report['recording']
-    print(f"recording on vs off: end-to-end median {rec['on']['e2e_ms']['median']:.2f} vs "
+    print(f"recording on vs off: planner median {rec['on']['planner_ms']['median']:.2f} vs "
+          f"{rec['off']['planner_ms']['median']:.2f} ms, "
+          f"end-to-end median {rec['on']['e2e_ms']['median']:.2f} vs "
           f"{rec['off']['e2e_ms']['median']:.2f} ms, overhead median "
           f"{rec['on']['overhead_ms']['median']:.2f} vs "
-          f"{rec['off']['overhead_ms']['median']:.2f} ms "
-          f"(difference {rec['overhead_median_difference_ms']:+.2f} ms)")
+          f"{rec['off']['overhead_ms']['median']:.2f} ms; per request, on - off: "
+          f"end-to-end median {rec['paired_e2e_difference_ms']['median']:+.2f} ms, "
+          f"overhead median {rec['paired_overhead_difference_ms']['median']:+.2f} ms")
     print(f"burst recorded: {burst['recorded']}")
     print(f"node memory: {report['node_memory_mb']}")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
@@ -173,18 +180,24 @@ def run(peer: Peer) -> dict:
     cell = Cell.from_yaml(default_cell_path())
     pairs = station_pairs(cell)
     joints = random_pairs(cell, 50)
+    requests = [('s', k, a, b) for k, (a, b) in enumerate(pairs * 3)] + \
+        [('j', k, a, b) for k, (a, b) in enumerate(joints)]
+    _sequential(peer, requests, 'warm-')
+    # Recording on and off in turns, block by block, so that drift in the machine's speed
+    # falls on both alike; every request is asked twice in each mode.
     passes = {True: [], False: []}
-    for p, on in enumerate((True, False, True, False)):
-        if not on or p > 0:
-            peer.set_recording(on)
-        passes[on].append(_sequential(peer, pairs, joints, f'p{p}-'))
+    blocks = [requests[i:i + BLOCK] for i in range(0, len(requests), BLOCK)]
+    for turn in range(2):
+        for b, block in enumerate(blocks):
+            for on in ((True, False) if (b + turn) % 2 == 0 else (False, True)):
+                peer.set_recording(on)
+                passes[on].append(_sequential(peer, block, f'{turn}-{on}-'))
     on, off = (_merged(passes[mode]) for mode in (True, False))
     sequential = on  # the node as deployed: recording on
-    recording = {'on': on, 'off': off, 'passes': 2,
-                 'e2e_median_difference_ms': on['e2e_ms']['median'] - off['e2e_ms']['median'],
-                 'overhead_median_difference_ms':
-                     on['overhead_ms']['median'] - off['overhead_ms']['median']}
-    burst_bag = peer.set_recording(True).split('recording to ', 1)[1]
+    recording = {'on': on, 'off': off, 'asked_in_each_mode': 2, 'block': BLOCK,
+                 'paired_e2e_difference_ms': _paired(passes, 'e2e'),
+                 'paired_overhead_difference_ms': _paired(passes, 'overhead')}
+    burst_bag = peer.set_recording(True).split('recording to ', 1)[1]  # a bag of its own
     # The burst: 4 publishers at once, get_status polled throughout.
     ids = [[f'b{p}-{k}' for k in range(BURST // PUBLISHERS)] for p in range(PUBLISHERS)]
     status_ms, status_at, done = [], [], threading.Event()
@@ -230,28 +243,31 @@ def run(peer: Peer) -> dict:
             'burst_bag': burst_bag}
 
 
-def _sequential(peer: Peer, pairs, joints, prefix: str) -> dict:
-    """Ask every station pair three times and every joint pair once, one at a time."""
-    e2e, planner, in_node = [], [], []
+def _sequential(peer: Peer, requests, prefix: str) -> dict:
+    """Ask station ('s', k, from, to) and joint ('j', k, start, goal) requests in turn."""
+    e2e, planner, in_node, keys = [], [], [], []
 
     def ask(request_id: str, send) -> None:
         started = time.perf_counter()
         send()
         received, values = peer.wait(request_id)
         if 'planning_time_ms' in values and values['code'] == 'OK':
+            keys.append(request_id[len(prefix):])
             e2e.append((received - started) * 1000.0)
             planner.append(float(values['planning_time_ms']))
             in_node.append(float(values['node_ms']))
-    for k, (a, b) in enumerate(pairs * 3):
-        request = json.dumps({'id': f'{prefix}s{k}', 'from': a, 'to': b})
-        ask(f'{prefix}s{k}', lambda: peer.stations[0].publish(String(data=request)))
-    for k, (a, b) in enumerate(joints):
-        msg = JointTrajectory()
-        msg.header.frame_id = f'{prefix}j{k}'
-        msg.points = [JointTrajectoryPoint(positions=a.tolist()),
-                      JointTrajectoryPoint(positions=b.tolist())]
-        ask(f'{prefix}j{k}', lambda: peer.joints.publish(msg))
-    return {'e2e': e2e, 'planner': planner, 'in_node': in_node}
+    for kind, k, a, b in requests:
+        request_id = f'{prefix}{kind}{k}'
+        if kind == 's':
+            request = String(data=json.dumps({'id': request_id, 'from': a, 'to': b}))
+            ask(request_id, lambda: peer.stations[0].publish(request))
+        else:
+            msg = JointTrajectory()
+            msg.header.frame_id = request_id
+            msg.points = [JointTrajectoryPoint(positions=a.tolist()),
+                          JointTrajectoryPoint(positions=b.tolist())]
+            ask(request_id, lambda: peer.joints.publish(msg))
+    return {'e2e': e2e, 'planner': planner, 'in_node': in_node, 'keys': keys}
 
 
 def _merged(passes) -> dict:
@@ -262,6 +278,19 @@ def _merged(passes) -> dict:
             'overhead_ms': _stats(e2e - planner),
             'in_node_overhead_ms': _stats(in_node - planner),
             'transport_ms': _stats(e2e - in_node)}
+
+
+def _paired(passes, what: str) -> dict:
+    """Return the statistics over requests of (recording on - off), pass by pass."""
+    def measure(run) -> dict:
+        e2e = np.array(run['e2e'])
+        values = e2e if what == 'e2e' else e2e - np.array(run['planner'])
+        return dict(zip(run['keys'], values))
+    differences = []
+    for on, off in zip(passes[True], passes[False]):
+        with_on, with_off = measure(on), measure(off)
+        differences += [with_on[k] - with_off[k] for k in with_on if k in with_off]
+    return _stats(np.array(differences))
 
 
 def _recorded(bag: str) -> dict:

@@ -53,6 +53,7 @@ def harness(roadmap_cache, tmp_path_factory):
     """Yield a running node on the default cell (roadmap from the session cache), per module."""
     from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
     isolate_dds(tmp_path_factory.mktemp('dds'))
-    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0})
+    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0,
+                       'recording.directory': str(tmp_path_factory.mktemp('recordings'))})
     yield running
     running.close()

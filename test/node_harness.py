@@ -103,8 +103,9 @@ class Harness(Peer):
 
     def __init__(self, parameters: dict):
         """Start the node with ``parameters`` (name -> value) and wait until it is ready."""
-        self.recordings = tempfile.mkdtemp(prefix='wafer_recordings_')
-        parameters = {'recording.directory': self.recordings, **parameters}
+        parameters = {'recording.directory': tempfile.mkdtemp(prefix='wafer_recordings_'),
+                      **parameters}
+        self.recordings = parameters['recording.directory']
         context = rclpy.Context()
         rclpy.init(context=context)
         overrides = [Parameter(k, value=v) for k, v in parameters.items()]

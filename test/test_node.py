@@ -251,7 +251,7 @@ def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp
         answers = []
         node._send = lambda *items: answers.extend(items)  # catch what would be published
         node._on_station_request(serialize_message(
-            String(data='{"id": "n1", "from": "loadport1", "to": "loadlock1"}')))
+            String(data='{"id": "n1", "from": "loadport1", "to": "loadlock1"}')), {})
         (kind, data, number), = answers
         result = deserialize_message(data, DiagnosticStatus)
         assert kind == 'result' and result.name == 'n1' and number == 1

@@ -2,6 +2,8 @@
 
 import errno
 import io
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -14,8 +16,9 @@ from std_msgs.msg import String
 from wafer_planner_ros.node.cdr import joint_trajectory
 from wafer_planner_ros.recording import msgdefs
 from wafer_planner_ros.recording.bag import bag_file, qos, Topic
-from wafer_planner_ros.recording.reading import read, RecordingError, recover
+from wafer_planner_ros.recording.reading import read, RecordingError
 from wafer_planner_ros.recording.recorder import Recorder
+from wafer_planner_ros.recording.recover import recover
 
 TYPES = ('std_msgs/msg/String', 'trajectory_msgs/msg/JointTrajectory',
          'diagnostic_msgs/msg/DiagnosticStatus', 'visualization_msgs/msg/MarkerArray')
@@ -41,18 +44,18 @@ def test_definitions_are_what_an_independent_parser_rebuilds(type_name):
     assert msgdefs.type_hash(type_name) == store.hash_rihs01(type_name)
 
 
-def _session(directory, count: int, flush_every: int = 1) -> Recorder:
+def _session(directory, count: int) -> Recorder:
+    """Record ``count`` queries as the node does: a request, then its answer, flushed."""
     recorder = Recorder(directory, TOPICS)
     rng = np.random.default_rng(count)
     for k in range(1, count + 1):
-        recorder.record(TOPICS[0].name, serialize_message(String(data=f'{{"id": "r{k}"}}')),
-                        1_000_000_000 * k, 1_000_000_000 * k, k)
+        request = serialize_message(String(data=f'{{"id": "r{k}"}}'))
+        assert recorder.write_now([(TOPICS[0].name, request, 10 ** 9 * k, 10 ** 9 * k, k)],
+                                  flush=False)
         rows = [rng.normal(size=(30, 3)) for _ in range(3)]
-        recorder.record(TOPICS[1].name, joint_trajectory(k, 0, f'r{k}', ['a', 'b', 'c'],
-                                                         np.arange(30) * 0.01, *rows),
-                        1_000_000_000 * k + 5, 1_000_000_000 * k + 5, k)
-        if k % flush_every == 0:
-            assert recorder.flush().wait(10)
+        answer = joint_trajectory(k, 0, f'r{k}', ['a', 'b', 'c'], np.arange(30) * 0.01, *rows)
+        assert recorder.write_now([(TOPICS[1].name, answer, 10 ** 9 * k + 5,
+                                    10 ** 9 * k + 5, k)])
     return recorder
 
 
@@ -134,19 +137,16 @@ class _FillingDisk(io.BytesIO):
 
 def test_a_full_disk_stops_the_recording_and_says_so(tmp_path):
     errors = []
-    disk = {}
 
     def opener(path, mode):
-        disk['file'] = _FillingDisk(path, room=12000)
-        return disk['file']
+        return _FillingDisk(path, room=12000)
     recorder = Recorder(tmp_path / 'bag', TOPICS, errors.append, opener)
     recorder._writer.sync = lambda: None  # an in-memory file has nothing to fsync
-    reached = []
-    for k in range(1, 30):
-        recorder.record(TOPICS[0].name, serialize_message(String(data='x' * 500)), k, k, k)
-        reached.append(recorder.flush())
-    # Every waiter is released (nobody blocks on a recording that cannot go on).
-    assert all(event.wait(10) for event in reached)
+    safe = [recorder.write_now([(TOPICS[0].name, serialize_message(String(data='x' * 500)),
+                                 k, k, k)]) for k in range(1, 30)]
+    # Answered at once either way: True while the disk had room, then False.
+    first_failure = safe.index(False)
+    assert first_failure >= 10 and not any(safe[first_failure:])
     assert recorder.close() is None
     assert len(errors) == 1 and 'No space left on device' in errors[0]
     assert 'No space left on device' in recorder.status()['error']
@@ -154,6 +154,37 @@ def test_a_full_disk_stops_the_recording_and_says_so(tmp_path):
     recorder.record(TOPICS[0].name, b'late', 99, 99, 99)  # ignored, no exception
     # What reached the disk before it filled is recoverable.
     recovered = recover(tmp_path / 'bag')
-    assert 10 <= len(recovered.messages) < 29
-    assert [m.sequence for m in recovered.messages] == \
-        list(range(1, len(recovered.messages) + 1))
+    assert [m.sequence for m in recovered.messages] == list(range(1, first_failure + 1))
+
+
+def test_a_stalled_disk_does_not_hold_answers_and_loses_nothing(tmp_path):
+    recorder = Recorder(tmp_path / 'bag', TOPICS)
+    hung = threading.Event()
+    release = threading.Event()
+
+    def hanging_sync() -> None:  # fsync stuck, as on a dead mount
+        hung.set()
+        release.wait(30)
+    recorder._writer.sync = hanging_sync
+
+    def message(k: int):
+        return (TOPICS[0].name, serialize_message(String(data=f'm{k}')), k, k, k)
+    assert recorder.write_now([message(1)])
+    assert hung.wait(10)
+    wait_until(recorder.stalled)
+    # Queued, not written in place, and the caller is told so at once.
+    assert [recorder.write_now([message(k)]) for k in range(2, 6)] == [False] * 4
+    assert recorder.status()['stalled'] and recorder.status()['pending'] >= 4
+    release.set()
+    wait_until(lambda: not recorder.stalled() and recorder.status()['pending'] == 0)
+    assert recorder.write_now([message(6)])
+    assert recorder.close() is not None
+    assert [m.sequence for m in read(tmp_path / 'bag').messages] == [1, 2, 3, 4, 5, 6]
+
+
+def wait_until(predicate, timeout: float = 10.0) -> None:
+    """Wait until ``predicate()`` holds; fail after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, 'timed out'
+        time.sleep(0.01)

@@ -5,6 +5,7 @@ from pathlib import Path
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from node_harness import values, wait_for
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 from std_srvs.srv import SetBool
@@ -33,11 +34,13 @@ def test_set_recording_closes_and_opens_self_contained_bags(harness, default_cel
     harness.result('r1')
     assert _stop(harness) == first
     assert (first / 'metadata.yaml').is_file() and not harness.status()['recording']
+    assert harness.node.get_parameter('recording.enabled').value is False
     assert 'not recording' in harness.call('set_recording', SetBool.Request(data=False)).message
     harness.send_stations({'id': 'unrecorded', 'from': 'loadport1', 'to': 'loadlock2'})
     harness.result('unrecorded')
     second = _start(harness)
     assert second != first and harness.status()['recording']
+    assert harness.node.get_parameter('recording.enabled').value is True
     harness.send_stations({'id': 'r2', 'from': 'loadport2', 'to': 'loadlock2'})
     harness.send_stations({'id': 'r3', 'from': 'loadport2', 'to': 'nowhere'})
     harness.result('r2')
@@ -119,3 +122,42 @@ def test_the_enabled_parameter_closes_and_starts_recordings(harness):
     assert node.set_parameters([Parameter('recording.enabled', value=True)])[0].successful
     after = Path(harness.status()['recording_directory'])
     assert harness.status()['recording'] and after != before
+
+
+def test_an_answer_is_in_the_file_before_it_is_published(harness):
+    """What a client receives, a crash right after cannot take out of the recording."""
+    node = harness.node
+    bag = Path(harness.status()['recording_directory'])
+    seen = []
+    original = {pub: pub.publish for pub in (node._trajectory_pub, node._result_pub)}
+
+    def watch(publisher):
+        def publish(data):
+            # Read the file as another process would, now, before the message goes out.
+            message = deserialize_message(data, publisher.msg_type)
+            request_id = message.name if publisher is node._result_pub \
+                else message.header.frame_id
+            in_file = [(m.sequence, recording.channels[m.channel_id].topic)
+                       for recording in [read(bag)] for m in recording.messages]
+            seen.append((publisher.topic_name, request_id, in_file))
+            original[publisher](data)
+        return publish
+    try:
+        for publisher in original:
+            publisher.publish = watch(publisher)
+        harness.send_stations({'id': 'd1', 'from': 'loadport1', 'to': 'loadlock2'})
+        harness.send_stations({'id': 'd2', 'from': 'loadport1', 'to': 'nowhere'})
+        harness.result('d1')
+        harness.result('d2')
+    finally:
+        for publisher, publish in original.items():
+            publisher.publish = publish
+    assert [(topic, request_id) for topic, request_id, _ in seen] == [
+        ('/wafer_planner/trajectory', 'd1'), ('/wafer_planner/result', 'd1'),
+        ('/wafer_planner/result', 'd2')]
+    recording = read(bag)
+    numbers = {q.request_id: q.number for q in queries(recording)}
+    for topic, request_id, in_file in seen:
+        assert (numbers[request_id], topic) in in_file
+    trajectory_at_publish = seen[0][2]
+    assert (numbers['d1'], '/wafer_planner/result') in trajectory_at_publish  # both at once

@@ -130,12 +130,19 @@ class Cell:
         """Load and validate a cell file; raise CellError naming the bad key."""
         path = Path(path)
         try:
-            data = yaml.safe_load(path.read_text())
+            text = path.read_bytes()
         except OSError as exc:
             raise CellError(str(path), f'cannot read: {exc.strerror}') from None
+        return cls.from_text(text, source=str(path))
+
+    @classmethod
+    def from_text(cls, text, source: str) -> 'Cell':
+        """Validate the text (str or bytes) of a cell file read from ``source``."""
+        try:
+            data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise CellError(str(path), f'not valid YAML: {exc}') from None
-        return cls.from_dict(data, source=str(path))
+            raise CellError(source, f'not valid YAML: {exc}') from None
+        return cls.from_dict(data, source=source)
 
     @classmethod
     def from_dict(cls, data, source=None) -> 'Cell':

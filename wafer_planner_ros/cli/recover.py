@@ -10,8 +10,9 @@ writes ``metadata.yaml``. A complete recording is left as it is.
 import argparse
 import sys
 
-from wafer_planner_ros.cli.common import EXIT_OK, run
-from wafer_planner_ros.recording.reading import DAMAGED_SUFFIX, recover
+from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, run
+from wafer_planner_ros.errors import WaferPlannerError
+from wafer_planner_ros.recording.recover import DAMAGED_SUFFIX, recover
 
 
 def main(argv=None) -> int:
@@ -20,8 +21,14 @@ def main(argv=None) -> int:
     parser.add_argument('bags', nargs='+', metavar='BAG',
                         help='recording directory (or its .mcap file)')
     args = parser.parse_args(argv)
-    for bag in args.bags:
-        recording = recover(bag)
+    code = EXIT_OK
+    for bag in args.bags:  # one that cannot be recovered does not stop the others
+        try:
+            recording = recover(bag)
+        except (WaferPlannerError, OSError) as exc:
+            print(f'{bag}: not recovered: {exc}', file=sys.stderr)
+            code = EXIT_FAILURE
+            continue
         counts = ', '.join(f'{topic} {n}' for topic, n in recording.counts().items())
         contents = (f'{len(recording.messages)} messages ({counts}), '
                     f'{len(recording.attachments)} attachments, '
@@ -31,7 +38,7 @@ def main(argv=None) -> int:
         else:
             print(f'{bag}: cut off ({recording.cut}); recovered {contents}; the cut file is '
                   f'kept as {recording.path.name}{DAMAGED_SUFFIX}')
-    return EXIT_OK
+    return code
 
 
 def entry_point() -> int:

@@ -10,69 +10,19 @@ recorded requests to a running node at their recorded pace and compares its answ
 """
 
 import argparse
-from dataclasses import dataclass
 import sys
-from typing import List, Optional
+from typing import Optional, Tuple
 
 from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
-from wafer_planner_ros.cell import Cell
 from wafer_planner_ros.cli.common import (EXIT_FAILURE, EXIT_OK, Progress, recorded_queries,
                                           run, UsageError, write_json)
 from wafer_planner_ros.errors import CellError, PlanningError
 from wafer_planner_ros.node.requests import request_of, RequestError
 from wafer_planner_ros.planner import Planner, PlannerSettings
-from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query, short_label
+from wafer_planner_ros.recording.compare import (DEFAULT_TOLERANCE, judge, OK, row_for,
+                                                 summary, table)
+from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query
 from wafer_planner_ros.roadmap import RoadmapSettings
-import yaml  # after the package: ament_flake8 takes wafer_planner_ros for a third party
-
-OK = 'OK'
-"""The code of a planned query (``node.messages.plan_values``)."""
-DEFAULT_TOLERANCE = 1e-3
-"""Seconds of cycle time by which a replayed answer may differ from the recorded one."""
-
-
-@dataclass
-class Row:
-    """One query: the recorded answer, the replayed (or live) one and the verdict."""
-
-    number: int
-    request_id: str
-    ends: str
-    recorded: str
-    recorded_cycle: Optional[float]
-    answered: bool
-    """Whether the recording holds the query's answer."""
-    replayed: str = ''
-    replayed_cycle: Optional[float] = None
-    verdict: str = ''
-    """'same', 'DIFFERENT', or why the query was not compared."""
-
-    @property
-    def mismatch(self) -> bool:
-        """Return True when the answers differ."""
-        return self.verdict == 'DIFFERENT'
-
-
-def row_for(query: Query) -> Row:
-    """Return a row holding the recorded side of ``query``."""
-    start, goal = (short_label(end) for end in query.ends())
-    return Row(query.number, query.request_id, f'{start} -> {goal}' if start or goal else '',
-               query.code or '(none recorded)', query.cycle_time, query.result is not None)
-
-
-def judge(row: Row, code: str, cycle: Optional[float], tolerance: float) -> Row:
-    """Fill in the other side of ``row`` and its verdict."""
-    row.replayed, row.replayed_cycle = code, cycle
-    if row.recorded in NODE_ONLY_CODES:
-        row.verdict = 'not compared: the answer depended on the node at the time'
-    elif not row.answered:
-        row.verdict = 'not compared: no answer was recorded'
-    else:
-        same = code == row.recorded and (
-            cycle is None or row.recorded_cycle is None
-            or abs(cycle - row.recorded_cycle) <= tolerance)
-        row.verdict = 'same' if same else 'DIFFERENT'
-    return row
 
 
 class Replayer:
@@ -84,11 +34,8 @@ class Replayer:
         self._planners = {}
 
     def planner(self, query: Query) -> Planner:
-        """Return the planner of the roadmap the query was answered on."""
+        """Return the planner of the roadmap the query was answered on (it has one)."""
         load = query.load
-        if load is None:
-            raise UsageError(f'query {query.number} has no recorded roadmap load: '
-                             'the recording holds no cell file for it')
         period = float(query.parameters.get('trajectory.sample_period', 0.01))
         key = (load.cell_text, load.values.get('roadmap_nodes'),
                load.values.get('roadmap_seed'))
@@ -101,10 +48,9 @@ class Replayer:
 
     def _load(self, load) -> Planner:
         try:
-            cell = Cell.from_dict(yaml.safe_load(load.cell_text),
-                                  source=load.values.get('cell_file', 'recorded cell.yaml'))
+            cell = load.cell
             nodes, seed = int(load.values['roadmap_nodes']), int(load.values['roadmap_seed'])
-        except (CellError, KeyError, ValueError, yaml.YAMLError) as exc:
+        except (CellError, KeyError, ValueError) as exc:
             raise UsageError(f'the recorded roadmap load cannot be used: {exc}') from None
         progress = None if self.quiet else Progress('building roadmap')
         cached = load_or_build(cell, RoadmapSettings(nodes=nodes), seed, self.cache_dir,
@@ -118,49 +64,27 @@ class Replayer:
                 'compared')
         return Planner(cell, cached.roadmap)
 
-    def answer(self, query: Query):
-        """Return (code, cycle time or None) of re-planning ``query``."""
+    def answer(self, query: Query) -> Tuple[str, Optional[float]]:
+        """
+        Return (code, cycle time or None) of answering ``query`` again as the node did.
+
+        The code is '' when it cannot be (the node's load decided it, or no roadmap had
+        been loaded when it arrived).
+        """
         if query.code in NODE_ONLY_CODES:
             return '', None
-        planner = self.planner(query)
         try:
+            if query.load is None:  # only a station request can be read without the cell
+                if query.kind != 'station':
+                    return '', None
+                request_of(query.kind, query.request, ())
+                return '', None
+            planner = self.planner(query)
             request = request_of(query.kind, query.request, planner.cell.robot.joint_names)
             result = planner.plan(request.start, request.goal)
-        except RequestError as exc:
-            return exc.code.value, None
-        except PlanningError as exc:
+        except (RequestError, PlanningError) as exc:
             return exc.code.value, None
         return OK, result.cycle_time
-
-
-def table(rows: List[Row]) -> str:
-    """Return the rows as a text table."""
-    lines = [f"{'#':>4}  {'id':<18}{'from -> to':<34}{'recorded':<20}{'cycle':>8}  "
-             f"{'replayed':<20}{'cycle':>8}{'Δ ms':>8}  verdict"]
-    for r in rows:
-        delta = (f'{(r.replayed_cycle - r.recorded_cycle) * 1000:8.3f}'
-                 if r.replayed_cycle is not None and r.recorded_cycle is not None else ' ' * 8)
-        lines.append(f'{r.number:>4}  {_cut(r.request_id, 17):<18}{_cut(r.ends, 33):<34}'
-                     f'{_cut(r.recorded, 19):<20}{_seconds(r.recorded_cycle)}  '
-                     f'{_cut(r.replayed, 19):<20}{_seconds(r.replayed_cycle)}{delta}  '
-                     f'{r.verdict}')
-    return '\n'.join(lines)
-
-
-def summary(rows: List[Row], what: str) -> str:
-    """Return one line counting the verdicts."""
-    same = sum(r.verdict == 'same' for r in rows)
-    different = sum(r.mismatch for r in rows)
-    return (f'{len(rows)} queries: {same} {what}, {different} different, '
-            f'{len(rows) - same - different} not compared')
-
-
-def _cut(text: str, width: int) -> str:
-    return text if len(text) <= width else text[:width - 1] + '…'
-
-
-def _seconds(value: Optional[float]) -> str:
-    return f'{value:8.3f}' if value is not None else ' ' * 8
 
 
 def main(argv=None) -> int:

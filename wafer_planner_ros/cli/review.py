@@ -23,10 +23,9 @@ from wafer_planner_ros.cell import Cell
 from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, recorded_queries, run
 from wafer_planner_ros.cli.common import UsageError
 from wafer_planner_ros.errors import CellError
-from wafer_planner_ros.node.requests import request_of, RequestError
+from wafer_planner_ros.node.requests import end_label, request_of, RequestError
 from wafer_planner_ros.plotting import plot_ends, plot_motion
 from wafer_planner_ros.recording.queries import label_configuration, Query, short_label
-import yaml  # sorted with the others: ament_flake8 does not know the package's own name
 
 INDEX = 'index.html'
 DEFAULT_DPI = 80
@@ -71,7 +70,8 @@ def asked(query: Query, cell: Cell) -> Tuple[str, str, str]:
         request = request_of(query.kind, query.request, cell.robot.joint_names)
     except (RequestError, AttributeError, TypeError, ValueError):
         return request_id, '', ''
-    return request_id or request.request_id, _label(request.start), _label(request.goal)
+    return (request_id or request.request_id, end_label(request.start),
+            end_label(request.goal))
 
 
 def title(query: Query, cell: Cell) -> str:
@@ -172,7 +172,6 @@ def cells_of(found: List[Query], fallback: Optional[Cell] = None) -> Dict[int, C
     loaded cell; ``fallback`` is used when the recording holds no cell at all.
     """
     first = next((query.load for query in found if query.load is not None), None)
-    parsed: Dict[bytes, Cell] = {}
     cells = {}
     for query in found:
         load = query.load or first
@@ -181,14 +180,10 @@ def cells_of(found: List[Query], fallback: Optional[Cell] = None) -> Dict[int, C
                 raise UsageError(f'query {query.number} has no recorded cell file: pass --cell')
             cells[query.number] = fallback
             continue
-        if load.cell_text not in parsed:
-            source = load.values.get('cell_file', 'recorded cell.yaml')
-            try:
-                parsed[load.cell_text] = Cell.from_dict(yaml.safe_load(load.cell_text),
-                                                        source=source)
-            except (CellError, yaml.YAMLError, TypeError, ValueError) as exc:
-                raise UsageError(f'the recorded cell {source} cannot be read: {exc}') from None
-        cells[query.number] = parsed[load.cell_text]
+        try:
+            cells[query.number] = load.cell
+        except CellError as exc:
+            raise UsageError(f'the recorded cell cannot be used: {exc}') from None
     return cells
 
 
@@ -200,13 +195,6 @@ def _robot_order(trajectory, joint_names) -> tuple:
         return arrays
     order = [names.index(name) for name in joint_names]
     return tuple(values[:, order] for values in arrays)
-
-
-def _label(end) -> str:
-    """Return a request's end as a label: a station name, or the joint values as JSON."""
-    if isinstance(end, str):
-        return end
-    return json.dumps(np.asarray(end, float).reshape(-1).tolist())
 
 
 def _configuration(label: str, cell: Cell) -> Optional[np.ndarray]:

@@ -87,16 +87,20 @@ class PlannerPeer(Node):
             rclpy.spin_once(self, timeout_sec=0.1)
         return True
 
-    def _ready(self) -> bool:
-        """Return whether the planner answers ``~/get_status`` with ready."""
+    def planner_status(self) -> dict:
+        """Return the planner's ``~/get_status`` ({} when it does not answer in 2 s)."""
         if not self.status.service_is_ready():
-            return False
+            return {}
         future = self.status.call_async(Trigger.Request())
         rclpy.spin_until_future_complete(self, future, timeout_sec=2.0)
         try:
-            return bool(future.done() and json.loads(future.result().message).get('ready'))
+            return json.loads(future.result().message) if future.done() else {}
         except ValueError:
-            return False
+            return {}
+
+    def _ready(self) -> bool:
+        """Return whether the planner answers ``~/get_status`` with ready."""
+        return bool(self.planner_status().get('ready'))
 
 
 class _Client(PlannerPeer):

@@ -4,9 +4,9 @@ import json
 from typing import Mapping, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus
-import numpy as np
 
 from wafer_planner_ros.node import cdr
+from wafer_planner_ros.node.requests import end_label
 
 LEVELS = {'ok': ord(DiagnosticStatus.OK), 'warn': ord(DiagnosticStatus.WARN),
           'error': ord(DiagnosticStatus.ERROR)}
@@ -58,15 +58,7 @@ def error_values(code: str, roadmap, start, goal, planning_ms: Optional[float]) 
 def _ends(roadmap, start, goal) -> dict:
     return {'roadmap_hash': roadmap.digest if roadmap is not None else '',
             'seed': roadmap.seed if roadmap is not None else '',
-            'from': _label(start), 'to': _label(goal)}
-
-
-def _label(end) -> str:
-    if end is None:
-        return ''
-    if isinstance(end, str):
-        return end
-    return json.dumps(np.asarray(end, float).reshape(-1).tolist())
+            'from': end_label(start), 'to': end_label(goal)}
 
 
 def _text(value) -> str:

@@ -28,6 +28,7 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
@@ -52,8 +53,6 @@ RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
                       reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-DURABLE_WAIT = 0.25
-"""Seconds an answer waits for its recording to be safe from a crash (a stalled disk)."""
 # The QoS profiles, as the recording's channel metadata states them.
 RELIABLE_OFFERED = qos(keep_all=True, depth=RELIABLE.depth)
 LATCHED_OFFERED = qos(depth=1, transient_local=True)
@@ -93,6 +92,7 @@ class WaferPlannerNode(Node):
             String, '~/plan_station_request', self._on_station_request, RELIABLE, raw=True)
         self._numbers = itertools.count(1)
         self._late_records = 0
+        self._switching_recording = False
         self._recording = NodeRecording(self.get_name(), [
             Topic(self._joint_sub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
                   RELIABLE_OFFERED),
@@ -118,9 +118,9 @@ class WaferPlannerNode(Node):
 
     # ----------------------------------------------------------------- requests in
 
-    def _on_joint_request(self, data: bytes) -> None:
+    def _on_joint_request(self, data: bytes, info) -> None:
         received, number = time.monotonic(), next(self._numbers)
-        self._recording.record(self._joint_sub.topic_name, data, number)
+        self._recording.request(self._joint_sub.topic_name, data, number, info)
         msg = deserialize_message(data, JointTrajectory)
         cell = self._cell
         if cell is None:  # the joint names cannot be checked yet: not ready, as documented
@@ -134,9 +134,9 @@ class WaferPlannerNode(Node):
             return
         self._enqueue(number, request, received)
 
-    def _on_station_request(self, data: bytes) -> None:
+    def _on_station_request(self, data: bytes, info) -> None:
         received, number = time.monotonic(), next(self._numbers)
-        self._recording.record(self._station_sub.topic_name, data, number)
+        self._recording.request(self._station_sub.topic_name, data, number, info)
         try:
             request = request_of('station', deserialize_message(data, String), ())
         except RequestError as exc:
@@ -189,8 +189,8 @@ class WaferPlannerNode(Node):
             settings = self.settings
         started = time.monotonic()
         try:
-            cell_text = settings.cell_file.read_bytes()
-            cell = Cell.from_yaml(settings.cell_file)
+            cell_text = settings.cell_file.read_bytes()  # the very text that is recorded
+            cell = Cell.from_text(cell_text, str(settings.cell_file))
             self._cell = cell
             self.get_logger().info(f'cell {cell.name} from {settings.cell_file}; loading or '
                                    f'building a roadmap of {settings.nodes} nodes')
@@ -269,15 +269,15 @@ class WaferPlannerNode(Node):
         level = 'warn' if result.warnings else 'ok'
         message = '; '.join(result.warnings) or (
             f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
-        # The trajectory before its result, so that a client holding the result can rely on
-        # the trajectory having been sent; the markers, for people, after both.
-        self._send(('trajectory', messages.trajectory(result, request.request_id,
-                                                      planner.cell.robot.joint_names, stamp),
-                    number),
-                   ('result', messages.result_status(
-                       request.request_id, level, message,
-                       dict(messages.plan_values(result, roadmap, request.start, request.goal),
-                            node_ms=(time.monotonic() - received) * 1000.0)), number))
+        # The trajectory and its result go together (see _on_deliver); the markers, for
+        # people, after both.
+        self._send(('answer', (
+            messages.trajectory(result, request.request_id, planner.cell.robot.joint_names,
+                                stamp),
+            messages.result_status(
+                request.request_id, level, message,
+                dict(messages.plan_values(result, roadmap, request.start, request.goal),
+                     node_ms=(time.monotonic() - received) * 1000.0))), number))
         self._send(('path', markers.path_markers(planner.cell, result, settings.frame_id,
                                                  stamp), number))
         with self._lock:
@@ -305,21 +305,24 @@ class WaferPlannerNode(Node):
         self._deliver.trigger()
 
     def _on_deliver(self) -> None:
-        publishers = {'trajectory': self._trajectory_pub, 'result': self._result_pub,
-                      'markers': self._roadmap_pub, 'path': self._path_pub}
         while True:
             with self._lock:
                 if not self._outbox:
                     return
                 kind, msg, number = self._outbox.popleft()
-            publisher = publishers[kind]
-            if kind in ('trajectory', 'result'):
-                # Recorded first: once a query is answered, a crash cannot lose it.
-                durable = self._recording.record(publisher.topic_name, msg, number,
-                                                 flush=kind == 'result')
-                if durable is not None and not durable.wait(DURABLE_WAIT):
+            if kind in ('answer', 'result'):
+                # An answer is recorded, and safe from a crash, before it goes out. The
+                # trajectory before its result: a client holding the result can rely on
+                # the trajectory having been sent.
+                out = ((self._trajectory_pub, msg[0]), (self._result_pub, msg[1])) \
+                    if kind == 'answer' else ((self._result_pub, msg),)
+                if self._recording.answer(number, [(p.topic_name, data)
+                                                   for p, data in out]) is False:
                     self._late_records += 1
-            publisher.publish(msg)
+                for publisher, data in out:
+                    publisher.publish(data)
+            else:
+                (self._roadmap_pub if kind == 'markers' else self._path_pub).publish(msg)
 
     # ----------------------------------------------------------------- services, health
 
@@ -368,13 +371,34 @@ class WaferPlannerNode(Node):
             response.message = (f'recording to {self._recording.last_directory}'
                                 if response.success else self._recording.last_error)
         else:
-            directory = self._recording.stop()
-            response.success = True
-            response.message = f'recording closed: {directory}' if directory is not None \
-                else 'not recording'
-            if directory is not None:
-                self.get_logger().info(response.message)
+            response.success, response.message = self._stop_recording()
+            self._log_closed(response.success, response.message)
+        # Keep recording.enabled telling the truth (without switching a second time).
+        self._switching_recording = True
+        try:
+            self.set_parameters([Parameter('recording.enabled', value=bool(request.data))])
+        finally:
+            self._switching_recording = False
         return response
+
+    def _log_closed(self, success: bool, message: str) -> None:
+        if message == 'not recording':
+            return
+        if not self.context.ok():  # after Ctrl-C or SIGTERM the logger cannot reach /rosout
+            print(f'[wafer_planner] {message}', file=sys.stderr, flush=True)
+        elif success:
+            self.get_logger().info(message)
+        else:
+            self.get_logger().error(message)
+
+    def _stop_recording(self) -> tuple:
+        """Close the recording; return (closed properly, a sentence saying so)."""
+        directory, error = self._recording.stop()
+        if directory is None:
+            return True, 'not recording'
+        if error:
+            return False, f'recording {directory} not closed properly: {error}'
+        return True, f'recording closed: {directory}'
 
     def _start_recording(self) -> bool:
         with self._lock:
@@ -407,7 +431,7 @@ class WaferPlannerNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message += f"; {status['recording_error']}"
         keys = ('ready', 'nodes', 'edges', 'queue', 'served', 'failed', 'recording',
-                'recording_directory', 'recording_error')
+                'recording_directory', 'recording_error', 'answers_before_recorded')
         health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
                                   message=message, hardware_id='wafer_planner',
                                   values=[KeyValue(key=k, value=str(status[k])) for k in keys])
@@ -429,26 +453,22 @@ class WaferPlannerNode(Node):
             with self._lock:
                 self.settings = settings
             self._recording.parameters(self._parameter_values(changed))
-            if 'recording.enabled' in changed:
+            if 'recording.enabled' in changed and not self._switching_recording:
                 if settings.recording_enabled:
                     self._start_recording()
                 else:
-                    self._recording.stop()
+                    self._log_closed(*self._stop_recording())
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:
-        """Stop the worker (after the request it is planning), then destroy the node."""
+        """Close the recording, stop the worker (after its request), destroy the node."""
         with self._lock:
             self._stopping = True
             self._lock.notify_all()
+        # First: a worker busy building a roadmap may outlast a launcher's patience, and
+        # answers not yet published are not recorded either.
+        self._log_closed(*self._stop_recording())
         self._worker.join(timeout=30.0)
-        directory = self._recording.stop()
-        if directory is not None:
-            closed = f'recording closed: {directory}'
-            if self.context.ok():
-                self.get_logger().info(closed)
-            else:  # after Ctrl-C or SIGTERM the logger can no longer reach /rosout
-                print(f'[wafer_planner] {closed}', file=sys.stderr, flush=True)
         super().destroy_node()
 
 

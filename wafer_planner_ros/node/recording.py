@@ -14,8 +14,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 import threading
 import time
-from typing import Callable, Mapping, Optional, Sequence
+from typing import Callable, Mapping, Optional, Sequence, Tuple
 
+from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.recording.bag import Topic
 from wafer_planner_ros.recording.contents import (CELL_ATTACHMENT, LOAD_METADATA,
                                                   PARAMETERS_ATTACHMENT, parameters_file)
@@ -51,23 +52,19 @@ class NodeRecording:
         self.last_error = ''
         self.last_directory: Optional[Path] = None
 
-    @property
-    def active(self) -> bool:
-        """Return True while recording (and not failed)."""
-        recorder = self._recorder
-        return recorder is not None and not recorder.error
-
     def start(self, parent: Path) -> Path:
         """Start a new bag under ``parent``; return its directory. Raises ``OSError``."""
         with self._lock:
             if self._recorder is not None and not self._recorder.error:
                 return self._recorder.directory
-            directory = Path(parent).expanduser() / bag_name(self._node_name)
-            try:
-                recorder = Recorder(directory, self._topics, self._failed)
-            except OSError as exc:
-                self.last_error = f'cannot record to {directory}: {exc.strerror or exc}'
-                raise OSError(self.last_error) from exc
+        directory = Path(parent).expanduser() / bag_name(self._node_name)
+        try:  # not under the lock: the worker needs it, and a dead mount may hang here
+            recorder = Recorder(directory, self._topics, self._failed)
+        except (OSError, WaferPlannerError) as exc:
+            reason = getattr(exc, 'strerror', None) or exc
+            self.last_error = f'cannot record to {directory}: {reason}'
+            raise OSError(self.last_error) from exc
+        with self._lock:
             self._recorder, self.last_error, self.last_directory = recorder, '', directory
             if self._parameters is not None:
                 recorder.attach(PARAMETERS_ATTACHMENT, self._parameters, time.time_ns())
@@ -76,30 +73,42 @@ class NodeRecording:
             recorder.flush()
             return directory
 
-    def stop(self) -> Optional[Path]:
-        """Close the bag (``metadata.yaml`` written); return its directory, None if none."""
+    def stop(self) -> Tuple[Optional[Path], str]:
+        """
+        Close the bag (``metadata.yaml`` written).
+
+        Return its directory (None when not recording) and why it could not be closed
+        properly ('' when it was).
+        """
         with self._lock:
             recorder, self._recorder = self._recorder, None
         if recorder is None:
-            return None
+            return None, ''
         if recorder.close() is None:
             self.last_error = recorder.error
-        return recorder.directory
+            return recorder.directory, recorder.error
+        return recorder.directory, ''
 
-    def record(self, topic: str, data: bytes, number: int,
-               flush: bool = False) -> Optional[threading.Event]:
+    def request(self, topic: str, data: bytes, number: int, info: Mapping) -> None:
+        """Record request ``number`` as received (``info``: rmw's message info, in ns)."""
+        recorder = self._recorder
+        if recorder is not None:
+            received = info.get('received_timestamp') or time.time_ns()
+            sent = info.get('source_timestamp') or received
+            recorder.write_now([(topic, data, received, sent, number)], flush=False)
+
+    def answer(self, number: int, messages: Sequence[Tuple[str, bytes]]) -> Optional[bool]:
         """
-        Record a message now (request, trajectory or result of query ``number``).
+        Record the answer to query ``number`` (its trajectory and result) before it goes out.
 
-        With ``flush``, return the event set once it is safe from a crash (None when not
-        recording).
+        Return True once a process crash can no longer lose it, False when it could not be
+        made safe (a stalled disk, a failed recording), None when not recording.
         """
         recorder = self._recorder
         if recorder is None:
             return None
         now = time.time_ns()
-        recorder.record(topic, data, now, now, number)
-        return recorder.flush() if flush else None
+        return recorder.write_now([(topic, data, now, now, number) for topic, data in messages])
 
     def loaded(self, loaded: Loaded) -> None:
         """Record a new roadmap before it serves (and keep it for a bag started later)."""
@@ -136,7 +145,7 @@ class NodeRecording:
         state = recorder.status()
         return {'recording': not state['error'], 'recording_directory': state['directory'],
                 'recording_error': state['error'], 'recorded': state['written'],
-                'recording_dropped': state['dropped']}
+                'recording_dropped': state['dropped'], 'recording_stalled': state['stalled']}
 
     def _add_loaded(self, recorder: Recorder, loaded: Loaded) -> None:
         recorder.attach(CELL_ATTACHMENT, loaded.cell_text, loaded.loaded_ns)

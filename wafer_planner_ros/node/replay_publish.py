@@ -9,6 +9,7 @@ an id, and unreadable ones have none).
 """
 
 import os
+import sys
 import time
 from typing import List
 
@@ -17,10 +18,10 @@ from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
-from wafer_planner_ros.cli.replay import judge, OK, Row, row_for
 from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.node.client import PlannerPeer
 from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.recording.compare import judge, OK, Row, row_for
 from wafer_planner_ros.recording.queries import Query
 
 NO_ANSWER = '(no answer)'
@@ -39,6 +40,12 @@ def publish(found: List[Query], node: str, timeout: float, tolerance: float) -> 
                                            RELIABLE)}
         if not peer.wait_ready(time.monotonic() + timeout, publishers.values()):
             raise WaferPlannerError(f'{planner} was not ready within {timeout:g} s')
+        live = peer.planner_status().get('hash', '')
+        recorded = {q.load.roadmap_hash for q in found if q.load is not None}
+        if recorded and live not in recorded:
+            print(f'warning: {planner} plans on roadmap {live[:12] or "?"}, the recording on '
+                  f'{", ".join(sorted(h[:12] for h in recorded))}: its answers may differ '
+                  '(another cell, roadmap size or seed)', file=sys.stderr)
         executor = SingleThreadedExecutor()
         executor.add_node(peer)
         first, began = found[0].received_ns, time.monotonic()
@@ -47,8 +54,12 @@ def publish(found: List[Query], node: str, timeout: float, tolerance: float) -> 
             while time.monotonic() < due:
                 executor.spin_once(timeout_sec=min(0.01, max(due - time.monotonic(), 0.0)))
             publishers[query.kind].publish(query.data)
-        deadline = time.monotonic() + timeout
-        while len(peer.answers) < len(found) and time.monotonic() < deadline:
+        deadline, counted = time.monotonic() + timeout, -1
+        while time.monotonic() < deadline:  # until every request has its answer
+            if len(peer.answers) != counted:
+                counted = len(peer.answers)
+                if None not in _pair(found, peer.answers):
+                    break
             executor.spin_once(timeout_sec=0.05)
         answers = list(peer.answers)
         executor.shutdown()

@@ -11,7 +11,7 @@ collision, known station).
 
 from dataclasses import dataclass
 import json
-from typing import Sequence, Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
 
@@ -39,6 +39,15 @@ class RequestError(Exception):
         """Keep the code, the sentence and the id."""
         super().__init__(message)
         self.code, self.message, self.request_id = code, message, request_id
+
+
+def end_label(end: Optional[End]) -> str:
+    """Return a request's end as a label: a station name, or the joint values as JSON."""
+    if end is None:
+        return ''
+    if isinstance(end, str):
+        return end
+    return json.dumps(np.asarray(end, float).reshape(-1).tolist())
 
 
 def request_of(kind: str, message, robot_joints: Sequence[str]) -> Request:

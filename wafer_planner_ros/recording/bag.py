@@ -122,10 +122,13 @@ class BagWriter:
 
     def __init__(self, directory: Path, topics: Sequence[Topic], opener=open):
         """Create ``directory`` (it must not exist yet) and start its MCAP file."""
+        self.topics = tuple(topics)
+        # Definitions first: a missing message package leaves no empty directory behind.
+        channels = [(t, msgdefs.definition(t.type).encode(), t.channel_metadata())
+                    for t in self.topics]
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=False)
         self.path = bag_file(self.directory)
-        self.topics = tuple(topics)
         self.counts = {t.name: 0 for t in self.topics}
         self.start_ns: Optional[int] = None
         self.end_ns = 0
@@ -133,13 +136,11 @@ class BagWriter:
         self._writer = Writer(self._stream, compression=CompressionType.NONE)
         self._writer.start(profile='ros2', library=f'wafer_planner_ros {__version__}')
         self._channels = {}
-        for topic in self.topics:
-            schema = self._writer.register_schema(
-                name=topic.type, encoding='ros2msg',
-                data=msgdefs.definition(topic.type).encode())
+        for topic, definition, metadata in channels:
+            schema = self._writer.register_schema(name=topic.type, encoding='ros2msg',
+                                                  data=definition)
             self._channels[topic.name] = self._writer.register_channel(
-                topic=topic.name, message_encoding='cdr', schema_id=schema,
-                metadata=topic.channel_metadata())
+                topic=topic.name, message_encoding='cdr', schema_id=schema, metadata=metadata)
         self.closed = False
 
     def write(self, topic: str, data: bytes, log_time: int, publish_time: int,

@@ -9,12 +9,14 @@ ROS installation is needed to read them.
 """
 
 from dataclasses import dataclass, field
+import functools
 import json
 from typing import Dict, List, Mapping, Optional, Tuple
 
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 
+from wafer_planner_ros.cell import Cell
 from wafer_planner_ros.recording.contents import (CELL_ATTACHMENT, LOAD_METADATA,
                                                   PARAMETERS_ATTACHMENT, read_parameters)
 from wafer_planner_ros.recording.reading import Recording
@@ -36,6 +38,11 @@ class Load:
     def roadmap_hash(self) -> str:
         """Return the hash of the roadmap the node planned on."""
         return self.values.get('roadmap_hash', '')
+
+    @functools.cached_property
+    def cell(self) -> Cell:
+        """Return the recorded cell; raise CellError when it cannot be used."""
+        return Cell.from_text(self.cell_text, self.values.get('cell_file', CELL_ATTACHMENT))
 
 
 @dataclass(frozen=True)

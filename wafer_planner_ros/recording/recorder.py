@@ -1,15 +1,24 @@
 """
-The recorder: a ``BagWriter`` behind a queue and a thread of its own (SPEC section 6).
+The recorder: one ``BagWriter``, a lock, and a thread for the slow work (SPEC section 6).
 
-The node hands it bytes that are already serialised; every call returns at once, so disk
-I/O never holds up planning. ``flush`` marks a durability point and returns an event: it is
-set once everything queued before it has been handed to the operating system (a process
-crash, even SIGKILL, then loses none of it); the file is ``fsync``-ed right after, against
-power loss. The node records a query's trajectory and result, waits (briefly, bounded) for
-that event, and only then publishes: no query is answered that a crash could lose.
-A write error (a full disk, a directory that vanished) stops the recording, is reported
-through ``on_error`` and ``status()``, and leaves the bag readable up to its last flush
-(``wafer-recover`` completes it). Planning goes on regardless.
+Two ways in, one file order:
+
+- ``write_now`` (the node's executor: requests as they arrive, a query's trajectory and
+  result before they are published) writes in the calling thread and, with ``flush``,
+  hands everything to the operating system before it returns: once it returns True a
+  process crash, even SIGKILL, cannot lose those messages. Writing in place costs a few
+  hundred microseconds; handing the bytes to another thread and waiting for it costs
+  milliseconds as soon as a planning thread holds the GIL.
+- ``record``, ``attach`` and ``metadata`` (the worker: roadmap markers, the cell file) only
+  queue; the thread writes them. Queued items are written before any later ``write_now``.
+
+The thread also ``fsync``-s the file after every flush, against power loss. When a sync
+has hung for ``STALL`` seconds, or the writer lock cannot be had in that time, the disk is
+taken as stalled: ``write_now`` then queues its messages and returns False at once, so
+answers are never held up by a stuck disk (the caller counts them). A write error (a full
+disk, a directory that vanished) stops the recording, is reported through ``on_error``
+and ``status()``, and leaves the bag readable up to its last flush (``wafer-recover``
+completes it). Planning goes on regardless.
 """
 
 from collections import deque
@@ -17,7 +26,7 @@ import logging
 from pathlib import Path
 import threading
 import time
-from typing import Callable, Mapping, Optional, Sequence
+from typing import Callable, Mapping, Optional, Sequence, Tuple
 
 from wafer_planner_ros.recording.bag import BagWriter, Topic
 
@@ -25,6 +34,11 @@ logger = logging.getLogger(__name__)
 
 MAX_PENDING = 20000
 """Queued items beyond which new ones are dropped (and counted) rather than held."""
+STALL = 0.25
+"""Seconds after which a hung sync or a held writer lock counts as a stalled disk."""
+
+Message = Tuple[str, bytes, int, int, int]
+"""(topic, serialised bytes, log time ns, publish time ns, sequence)."""
 
 
 def bag_name(node_name: str, when: Optional[float] = None) -> str:
@@ -35,7 +49,7 @@ def bag_name(node_name: str, when: Optional[float] = None) -> str:
 
 
 class Recorder:
-    """Record to a new bag in ``directory`` from a thread; see the module's description."""
+    """Record to a new bag in ``directory``; see the module's description."""
 
     def __init__(self, directory: Path, topics: Sequence[Topic],
                  on_error: Optional[Callable[[str], None]] = None, opener=open):
@@ -43,19 +57,65 @@ class Recorder:
         self._writer = BagWriter(directory, topics, opener)
         self.directory = self._writer.directory
         self._on_error = on_error
+        self._lock = threading.Lock()
+        """Held while the writer is used."""
         self._queue = deque()
         self._wake = threading.Condition()
+        """Guards the queue, the flags and the counters."""
+        self._sync_wanted = False
+        self._sync_began: Optional[float] = None
         self._closing = False
         self.error = ''
         self.dropped = 0
         self.written = 0
-        self.flushed = 0
-        """Messages known to be on the disk."""
         self._thread = threading.Thread(target=self._run, name='wafer_planner_recorder',
                                         daemon=True)
         self._thread.start()
 
-    # -------------------------------------------------------------- producers (any thread)
+    # -------------------------------------------------------------- the executor: in place
+
+    def write_now(self, messages: Sequence[Message], flush: bool = True) -> bool:
+        """
+        Write ``messages`` in this thread (after anything queued); return True when done.
+
+        With ``flush`` they are handed to the operating system before it returns. Returns
+        False, having queued them, when the disk is stalled; False, dropping them, when the
+        recording has failed or is closing.
+        """
+        if self.error or self._closing:
+            self._count_dropped(len(messages))
+            return False
+        if not self.stalled() and self._lock.acquire(timeout=STALL):
+            try:
+                if self.error:  # failed while this thread waited
+                    self._count_dropped(len(messages))
+                    return False
+                self._drain()
+                for message in messages:
+                    self._writer.write(*message)
+                self._count_written(len(messages))
+                if flush:
+                    self._writer.flush()
+            except Exception as exc:  # noqa: B902 - any failure stops the recording only
+                self._fail(exc)
+                return False
+            finally:
+                self._lock.release()
+            if flush:
+                self._want_sync()
+            return True
+        for message in messages:  # a stalled disk: the thread writes them when it can
+            self._put(('message', *message))
+        if flush:
+            self._put(('flush',))
+        return False
+
+    def stalled(self) -> bool:
+        """Return True while a sync has been hanging for more than ``STALL`` seconds."""
+        began = self._sync_began
+        return began is not None and time.monotonic() - began > STALL
+
+    # -------------------------------------------------------------- any thread: queued
 
     def record(self, topic: str, data: bytes, log_time: int, publish_time: int,
                sequence: int = 0) -> None:
@@ -71,11 +131,9 @@ class Recorder:
         """Queue a metadata record."""
         self._put(('metadata', name, dict(values)))
 
-    def flush(self) -> threading.Event:
-        """Queue a durability point; return the event set when it has been reached."""
-        reached = threading.Event()
-        self._put(('flush', reached))
-        return reached
+    def flush(self) -> None:
+        """Queue a durability point: a flush, then a sync."""
+        self._put(('flush',))
 
     def close(self, timeout: float = 30.0) -> Optional[Path]:
         """
@@ -88,87 +146,99 @@ class Recorder:
             self._wake.notify()
         self._thread.join(timeout)
         if self._thread.is_alive():
-            self._fail(f'recording did not finish within {timeout:.0f} s; '
-                       f'{len(self._queue)} items were not written')
+            self._fail(TimeoutError(f'recording did not finish within {timeout:.0f} s; '
+                                    f'{len(self._queue)} items were not written'))
             return None
         return None if self.error else self.directory / 'metadata.yaml'
 
     def status(self) -> dict:
         """Return the recording's state for status and diagnostics."""
-        return {'directory': str(self.directory), 'written': self.written,
-                'flushed': self.flushed, 'pending': len(self._queue),
-                'dropped': self.dropped, 'error': self.error}
+        with self._wake:
+            return {'directory': str(self.directory), 'written': self.written,
+                    'pending': len(self._queue), 'dropped': self.dropped,
+                    'stalled': self.stalled(), 'error': self.error}
 
     def _put(self, item) -> None:
         with self._wake:
             if self.error or self._closing or len(self._queue) >= MAX_PENDING:
-                _discard([item])
                 self.dropped += item[0] == 'message'
                 return
             self._queue.append(item)
             self._wake.notify()
 
+    def _want_sync(self) -> None:
+        with self._wake:
+            self._sync_wanted = True
+            self._wake.notify()
+
+    def _count_written(self, count: int) -> None:
+        with self._wake:
+            self.written += count
+
+    def _count_dropped(self, count: int) -> None:
+        with self._wake:
+            self.dropped += count
+
     # -------------------------------------------------------------- the thread
 
     def _run(self) -> None:
-        writer = self._writer
         while True:
             with self._wake:
-                while not self._queue and not self._closing:
+                while not self._queue and not self._sync_wanted and not self._closing:
                     self._wake.wait()
-                items = list(self._queue)
-                self._queue.clear()
-                closing = self._closing and not items
-            done = 0
+                closing = self._closing
+                sync, self._sync_wanted = self._sync_wanted, False
             try:
-                unsynced = False
-                for item in items:
-                    unsynced = self._apply(writer, item) or unsynced
-                    done += 1
-                if unsynced:  # once per batch: fsync takes ~0.3 ms
-                    writer.sync()
-                    self.flushed = self.written
-                if closing:
-                    writer.close()
-                    return
+                with self._lock:
+                    if self.error:
+                        return
+                    sync = self._drain() or sync
+                    if closing:
+                        self._writer.close()
+                        return
+                if sync:
+                    self._sync_began = time.monotonic()
+                    self._writer.sync()  # outside the lock: writes may go on meanwhile
+                    self._sync_began = None
             except Exception as exc:  # noqa: B902 - any failure stops the recording only
-                lost = items[done:]
-                with self._wake:
-                    self.dropped += sum(1 for item in lost if item[0] == 'message')
-                _discard(lost)
-                writer.abandon()
-                self._fail(f'recording to {writer.path} failed: {exc}')
+                self._fail(exc)
                 return
 
-    def _apply(self, writer: BagWriter, item) -> bool:
-        """Apply one queued item; return True after a flush (the file then needs a sync)."""
-        kind = item[0]
-        if kind == 'message':
-            writer.write(*item[1:])
-            self.written += 1
-        elif kind == 'flush':
-            writer.flush()
-            item[1].set()
-            return True
-        elif kind == 'attach':
-            writer.attach(*item[1:])
-        else:
-            writer.metadata(*item[1:])
-        return False
-
-    def _fail(self, message: str) -> None:
+    def _drain(self) -> bool:
+        """Write every queued item (the writer lock held); return True after a flush."""
         with self._wake:
+            items = list(self._queue)
+            self._queue.clear()
+        flushed, done = False, 0
+        try:
+            for item in items:
+                kind = item[0]
+                if kind == 'message':
+                    self._writer.write(*item[1:])
+                    self._count_written(1)
+                elif kind == 'flush':
+                    self._writer.flush()
+                    flushed = True
+                elif kind == 'attach':
+                    self._writer.attach(*item[1:])
+                else:
+                    self._writer.metadata(*item[1:])
+                done += 1
+        except Exception:
+            self._count_dropped(sum(1 for item in items[done:] if item[0] == 'message'))
+            raise
+        return flushed
+
+    def _fail(self, exc: BaseException) -> None:
+        message = f'recording to {self._writer.path} failed: {exc}'
+        with self._wake:
+            if self.error:
+                return
             self.error = message
             self.dropped += sum(1 for item in self._queue if item[0] == 'message')
-            _discard(self._queue)
             self._queue.clear()
+            self._wake.notify()
+        self._writer.abandon()
         logger.error(message)
         if self._on_error is not None:
             self._on_error(message)
-
-
-def _discard(items) -> None:
-    """Release whoever waits on the flush events among ``items`` (nothing will be written)."""
-    for item in items:
-        if item[0] == 'flush':
-            item[1].set()
