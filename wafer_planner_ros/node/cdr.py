@@ -2,7 +2,10 @@
 The CDR bytes of the messages the node sends most: trajectories (from arrays) and results.
 
 The recorder writes the very bytes that were published, and independent readers accept
-them; rclpy's own serialiser can append bytes that ``rosbags`` rejects.
+them. rclpy's own serialiser leaves alignment padding uninitialised and, after empty
+float64 sequences (a trajectory point's effort), can append bytes that ``rosbags`` rejects;
+the markers, which have no such sequences, are serialised by rclpy (the tests read them
+back with ``rosbags``).
 
 Building hundreds of ``JointTrajectoryPoint`` objects and letting rclpy convert them costs
 milliseconds per plan; the bytes, which ``Publisher.publish`` takes as they are, come from
