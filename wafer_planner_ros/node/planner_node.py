@@ -430,6 +430,10 @@ class WaferPlannerNode(Node):
         if status['recording_error']:
             level = max(level, DiagnosticStatus.WARN)
             message += f"; {status['recording_error']}"
+        elif status.get('recording_stalled'):
+            level = max(level, DiagnosticStatus.WARN)
+            message += ('; recording stalled: the disk has not synced for 0.25 s, answers go '
+                        'out before they are on it')
         keys = ('ready', 'nodes', 'edges', 'queue', 'served', 'failed', 'recording',
                 'recording_directory', 'recording_error', 'answers_before_recorded')
         health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
