@@ -15,16 +15,18 @@ from wafer_planner_ros.cli.common import EXIT_OK, EXIT_USAGE, run
 from wafer_planner_ros.cli.review import main
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.node import cdr, messages
+from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.planner import Planner
-from wafer_planner_ros.recording.bag import BagWriter, Topic
-from wafer_planner_ros.recording.contents import CELL_ATTACHMENT, LOAD_METADATA
+from wafer_planner_ros.recording.bag import Topic
 
 NODE = '/wafer_planner'
 STATION, TRAJECTORY, RESULT = (f'{NODE}/{name}' for name in
                                ('plan_station_request', 'trajectory', 'result'))
+MARKERS = f'{NODE}/roadmap_markers'
 TOPICS = [Topic(STATION, 'std_msgs/msg/String'),
           Topic(TRAJECTORY, 'trajectory_msgs/msg/JointTrajectory'),
-          Topic(RESULT, 'diagnostic_msgs/msg/DiagnosticStatus')]
+          Topic(RESULT, 'diagnostic_msgs/msg/DiagnosticStatus'),
+          Topic(MARKERS, 'visualization_msgs/msg/MarkerArray')]
 SPECIAL_ID = '<b>&"$x$'
 """A request id that HTML and matplotlib's mathtext would both misread."""
 REQUESTS = [('q1', 'loadport1', 'loadlock1'),
@@ -36,57 +38,53 @@ PLANNED, REFUSED = (1, 2), (3, 4)
 """The query numbers that have a trajectory, and those refused."""
 
 
-def record(directory: Path, cell, roadmap, requests, crash: bool = False) -> Path:
+def record(parent: Path, cell, roadmap, requests, crash: bool = False) -> Path:
     """
-    Write a recording as the node does: the roadmap load, then each request with its answer.
+    Record under ``parent`` with the node's own recording, as the node does; return the bag.
 
-    A request, its trajectory and its result carry the query number as their sequence.
-    ``crash``: the last request is not answered and the file is left without its summary
-    and footer, as when the node is killed.
+    First the roadmap load, then each request with its answer. ``crash``: the last request
+    is not answered and the file is left without its summary and footer, as when the node
+    is killed.
     """
     planner = Planner(cell, roadmap)
-    writer = BagWriter(directory, TOPICS)
-    loaded = time.time_ns()
-    writer.attach(CELL_ATTACHMENT, default_cell_path().read_bytes(), loaded)
-    writer.metadata(LOAD_METADATA, {
+    recording = NodeRecording('wafer_planner', TOPICS, MARKERS, print)
+    bag = recording.start(parent)
+    recording.loaded(Loaded(default_cell_path().read_bytes(), {
         'cell': cell.name, 'cell_file': str(default_cell_path()), 'roadmap_hash': roadmap.digest,
-        'roadmap_nodes': str(roadmap.node_count), 'roadmap_seed': str(roadmap.seed),
-        'loaded_ns': str(loaded)})
+        'roadmap_nodes': str(roadmap.node_count), 'roadmap_seed': str(roadmap.seed)},
+        time.time_ns()))
     for number, (request_id, start, goal) in enumerate(requests, 1):
-        now = loaded + number * 1_000_000
         text = json.dumps({'id': request_id, 'from': start, 'to': goal}) if start else '{"id": '
-        writer.write(STATION, serialize_message(String(data=text)), now, now, number)
+        recording.request(STATION, serialize_message(String(data=text)), number, {})
         if crash and number == len(requests):
-            writer.flush()  # the request reached the disk, its answer did not
-            break
+            break  # the request reached the file, its answer did not
         try:
             if start is None:
                 raise PlanningError('INVALID_REQUEST', 'the request is not JSON')
             result = planner.plan(start, goal)
         except PlanningError as exc:
-            status = messages.result_status(
+            answer = [(RESULT, messages.result_status(
                 request_id, 'error', f'{exc.code.value}: {exc.message}',
-                messages.error_values(exc.code.value, roadmap, start, goal, 0.2))
+                messages.error_values(exc.code.value, roadmap, start, goal, 0.2)))]
         else:
-            writer.write(TRAJECTORY, cdr.joint_trajectory(
+            answer = [(TRAJECTORY, cdr.joint_trajectory(
                 0, 0, request_id, cell.robot.joint_names, result.times, result.positions,
-                result.velocities, result.accelerations), now + 1, now + 1, number)
-            status = messages.result_status(request_id, 'ok', 'ok',
-                                            messages.plan_values(result, roadmap, start, goal))
-        writer.write(RESULT, status, now + 2, now + 2, number)
-        writer.flush()
-    if crash:
-        writer.abandon()
+                result.velocities, result.accelerations)),
+                (RESULT, messages.result_status(
+                    request_id, 'ok', 'ok', messages.plan_values(result, roadmap, start, goal)))]
+        assert recording.answer(number, answer)
+    if crash:  # the last request reached the disk, then the node was killed
+        assert recording._recorder.write_now([], flush=True)
+        recording._recorder._writer.abandon()
     else:
-        writer.close()
-    return directory
+        assert recording.stop() == (bag, '')
+    return bag
 
 
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory, default_cell, default_roadmap) -> Path:
     """Return a closed recording of ``REQUESTS``."""
-    return record(tmp_path_factory.mktemp('review') / 'bag', default_cell, default_roadmap,
-                  REQUESTS)
+    return record(tmp_path_factory.mktemp('review'), default_cell, default_roadmap, REQUESTS)
 
 
 def review(capsys, *argv):

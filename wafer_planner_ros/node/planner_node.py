@@ -2,18 +2,15 @@
 The planning node ``wafer_planner`` (SPEC section 5): a thin ROS edge around the core.
 
 Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
-publishing: every callback is short) and one worker that loads or rebuilds the roadmap and
-plans, one request at a time; the compiled kernels release the GIL. Requests
-are read and checked in the subscription callback, then wait in a bounded backlog
-(``planning.max_queue``; beyond it the answer is ``BUSY``). While the roadmap loads or is
-rebuilt new requests are answered ``ROADMAP_NOT_READY``; a request still waiting
-``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The worker hands
-every answer back to the executor through a guard condition, so all publishing happens on
-the executor; each request gets exactly one ``~/result``, whatever happens.
+publishing: every callback is short), the planning worker (``worker``: loads or rebuilds
+the roadmap and plans, one request at a time; the compiled kernels release the GIL) and the
+recorder's (``node.recording``). Requests are recorded, read and checked in the
+subscription callback, then handed to the worker. The worker hands every answer back
+through a guard condition, so all publishing happens on the executor, each answer recorded
+before it goes out; each request gets exactly one ``~/result``, whatever happens.
 """
 
 from collections import deque
-import gc
 import itertools
 import json
 import sys
@@ -30,22 +27,18 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from wafer_planner_ros.cache import load_or_build
-from wafer_planner_ros.cell import Cell
-from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
-from wafer_planner_ros.node import markers, messages
-from wafer_planner_ros.node.recording import Loaded, NodeRecording
+from wafer_planner_ros.errors import ErrorCode
+from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.requests import request_of, RequestError
 from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
-from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
-from wafer_planner_ros.roadmap import RoadmapSettings
 
 # Requests and answers: reliable and keep-all, so that a burst is delivered whole (a
 # keep-last reader cache drops the oldest samples of a burst longer than its depth).
@@ -69,17 +62,8 @@ class WaferPlannerNode(Node):
             self.declare_parameter(spec.name, spec.default, _descriptor(spec))
         self.settings = settings_from(
             {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS})
-        self._lock = threading.Condition()
-        self._backlog = deque()
+        self._outbox_lock = threading.Lock()
         self._outbox = deque()
-        self._planner = None
-        self._cell = None
-        self._cached = None
-        self._busy_with = None
-        self._load_failed = False
-        self._counts = {'served': 0, 'failed': 0}
-        self._last_error = ''
-        self._stopping = False
         self._trajectory_pub = self.create_publisher(JointTrajectory, '~/trajectory', RELIABLE)
         self._result_pub = self.create_publisher(DiagnosticStatus, '~/result', RELIABLE)
         self._roadmap_pub = self.create_publisher(MarkerArray, '~/roadmap_markers', LATCHED)
@@ -111,10 +95,9 @@ class WaferPlannerNode(Node):
         self.create_service(SetBool, '~/set_recording', self._on_set_recording)
         self._deliver = self.create_guard_condition(self._on_deliver)
         self.create_timer(1.0, self._publish_health)
-        self._worker = threading.Thread(target=self._work, name='wafer_planner_worker',
-                                        daemon=True)
-        self._backlog.append(('load', None))
-        self._worker.start()
+        self._worker = PlanningWorker(lambda: self.settings, self._recording,
+                                      lambda *items: self._send(*items), self.get_logger(),
+                                      lambda: self.get_clock().now().to_msg())
 
     # ----------------------------------------------------------------- requests in
 
@@ -122,17 +105,19 @@ class WaferPlannerNode(Node):
         received, number = time.monotonic(), next(self._numbers)
         self._recording.request(self._joint_sub.topic_name, data, number, info)
         msg = deserialize_message(data, JointTrajectory)
-        cell = self._cell
+        cell = self._worker.cell
         if cell is None:  # the joint names cannot be checked yet: not ready, as documented
-            self._answer_error(number, msg.header.frame_id, ErrorCode.ROADMAP_NOT_READY,
-                               'not ready: the cell is being loaded', None, None)
+            self._worker.answer_error(number, msg.header.frame_id,
+                                      ErrorCode.ROADMAP_NOT_READY,
+                                      'not ready: the cell is being loaded', None, None)
             return
         try:
             request = request_of('joint', msg, cell.robot.joint_names)
         except RequestError as exc:
-            self._answer_error(number, exc.request_id, exc.code, exc.message, None, None)
+            self._worker.answer_error(number, exc.request_id, exc.code, exc.message, None,
+                                      None)
             return
-        self._enqueue(number, request, received)
+        self._worker.enqueue(number, request, received)
 
     def _on_station_request(self, data: bytes, info) -> None:
         received, number = time.monotonic(), next(self._numbers)
@@ -140,173 +125,22 @@ class WaferPlannerNode(Node):
         try:
             request = request_of('station', deserialize_message(data, String), ())
         except RequestError as exc:
-            self._answer_error(number, exc.request_id, exc.code, exc.message, None, None)
+            self._worker.answer_error(number, exc.request_id, exc.code, exc.message, None,
+                                      None)
             return
-        self._enqueue(number, request, received)
-
-    def _enqueue(self, number: int, request, received: float) -> None:
-        with self._lock:
-            if self._planner is None:
-                reason = self._last_error if self._load_failed else \
-                    'the roadmap is being loaded or built'
-                code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {reason}'
-            elif sum(1 for kind, _ in self._backlog if kind == 'plan') \
-                    >= self.settings.max_queue:
-                code = ErrorCode.BUSY
-                message = (f'busy: {self.settings.max_queue} requests are already waiting '
-                           '(planning.max_queue)')
-            else:
-                self._backlog.append(('plan', (number, request, received)))
-                self._lock.notify()
-                return
-        self._answer_error(number, request.request_id, code, message, request.start,
-                           request.goal)
-
-    # ----------------------------------------------------------------- the worker
-
-    def _work(self) -> None:
-        while True:
-            with self._lock:
-                while not self._backlog and not self._stopping:
-                    self._lock.wait()
-                if self._stopping:
-                    return
-                kind, item = self._backlog.popleft()
-                self._busy_with = kind
-            try:
-                if kind == 'plan':
-                    self._plan(*item)
-                else:
-                    self._load()
-            finally:
-                with self._lock:
-                    self._busy_with = None
-
-    def _load(self) -> None:
-        """Load or build the roadmap for the current parameters; never raise."""
-        with self._lock:
-            self._planner = None
-            settings = self.settings
-        started = time.monotonic()
-        try:
-            cell_text = settings.cell_file.read_bytes()  # the very text that is recorded
-            cell = Cell.from_text(cell_text, str(settings.cell_file))
-            self._cell = cell
-            self.get_logger().info(f'cell {cell.name} from {settings.cell_file}; loading or '
-                                   f'building a roadmap of {settings.nodes} nodes')
-            cached = load_or_build(cell, RoadmapSettings(nodes=settings.nodes), settings.seed,
-                                   settings.cache_dir, self._progress())
-            planner = Planner(cell, cached.roadmap,
-                              PlannerSettings(sample_period=settings.sample_period))
-            _warm_up(planner)
-        except Exception as exc:  # noqa: B902 - the node stays up and says why
-            kind = '' if isinstance(exc, (WaferPlannerError, ValueError, OSError)) else \
-                'internal error: '
-            self._last_error = f'roadmap not loaded: {kind}{exc}'
-            self.get_logger().error(self._last_error)
-            with self._lock:
-                self._cached, self._load_failed = None, True
-            return
-        roadmap = cached.roadmap
-        # Everything loaded so far lives as long as the node: keep it out of the garbage
-        # collector's full passes, which otherwise pause every thread for tens of ms.
-        gc.collect()
-        gc.freeze()
-        # Recorded before it serves: every recorded query comes after the load it used.
-        self._recording.loaded(Loaded(cell_text, {
-            'cell': cell.name, 'cell_file': str(settings.cell_file),
-            'cell_digest': cell.digest, 'roadmap_hash': roadmap.digest,
-            'roadmap_nodes': str(settings.nodes), 'roadmap_seed': str(roadmap.seed),
-            'roadmap_edges': str(roadmap.edge_count)}, time.time_ns()))
-        with self._lock:
-            self._cached, self._planner, self._load_failed = cached, planner, False
-        roadmap_markers = serialize_message(markers.roadmap_markers(
-            cell, roadmap, settings.frame_id, self.get_clock().now().to_msg()))
-        self._send(('markers', roadmap_markers, 0))
-        self._recording.markers(roadmap_markers)
-        self.get_logger().info(
-            f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
-            f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
-            f'(ready {time.monotonic() - started:.2f} s after loading began)')
-
-    def _progress(self):
-        logger, last = self.get_logger(), [-1]
-
-        def report(done: int, total: int, edges: int) -> None:
-            tenth = 10 * done // max(total, 1)
-            if tenth != last[0]:
-                last[0] = tenth
-                logger.info(f'building roadmap: {done}/{total} nodes, {edges} edges')
-        return report
-
-    def _plan(self, number: int, request, received: float) -> None:
-        with self._lock:
-            planner, cached, settings = self._planner, self._cached, self.settings
-        roadmap = cached.roadmap if cached is not None else None
-        if planner is None:
-            self._answer_error(number, request.request_id, ErrorCode.ROADMAP_NOT_READY,
-                               'not ready: the roadmap is being rebuilt', request.start,
-                               request.goal)
-            return
-        if planner.settings.sample_period != settings.sample_period:
-            planner = Planner(planner.cell, planner.roadmap,
-                              PlannerSettings(sample_period=settings.sample_period))
-        begun = time.monotonic()
-        try:
-            result = planner.plan(request.start, request.goal,
-                                  deadline=received + settings.timeout)
-        except PlanningError as exc:
-            self._answer_error(number, request.request_id, exc.code, exc.message, request.start,
-                               request.goal, (time.monotonic() - begun) * 1000.0, roadmap)
-            return
-        except Exception as exc:  # noqa: B902 - every request gets its one answer
-            self.get_logger().error(f'request {request.request_id}: internal error {exc!r}')
-            self._answer_error(number, request.request_id, ErrorCode.INTERNAL,
-                               f'internal error: {exc!r}', request.start, request.goal,
-                               (time.monotonic() - begun) * 1000.0, roadmap)
-            return
-        stamp = self.get_clock().now().to_msg()
-        level = 'warn' if result.warnings else 'ok'
-        message = '; '.join(result.warnings) or (
-            f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
-        # The trajectory and its result go together (see _on_deliver); the markers, for
-        # people, after both.
-        self._send(('answer', (
-            messages.trajectory(result, request.request_id, planner.cell.robot.joint_names,
-                                stamp),
-            messages.result_status(
-                request.request_id, level, message,
-                dict(messages.plan_values(result, roadmap, request.start, request.goal),
-                     node_ms=(time.monotonic() - received) * 1000.0))), number))
-        self._send(('path', markers.path_markers(planner.cell, result, settings.frame_id,
-                                                 stamp), number))
-        with self._lock:
-            self._counts['served'] += 1
+        self._worker.enqueue(number, request, received)
 
     # ----------------------------------------------------------------- answers out
 
-    def _answer_error(self, number, request_id, code, message, start, goal,
-                      planning_ms=None, roadmap=None) -> None:
-        if roadmap is None and self._cached is not None:
-            roadmap = self._cached.roadmap
-        self.get_logger().warning(f'request {request_id or "(no id)"}: {code.value}: {message}')
-        status = messages.result_status(
-            request_id, 'error', f'{code.value}: {message}',
-            messages.error_values(code.value, roadmap, start, goal, planning_ms))
-        with self._lock:
-            self._counts['failed'] += 1
-            self._last_error = f'{request_id}: {code.value}: {message}'
-        self._send(('result', status, number))
-
     def _send(self, *items) -> None:
         """Hand messages to the executor (publishing happens in ``_on_deliver``)."""
-        with self._lock:
+        with self._outbox_lock:
             self._outbox.extend(items)
         self._deliver.trigger()
 
     def _on_deliver(self) -> None:
         while True:
-            with self._lock:
+            with self._outbox_lock:
                 if not self._outbox:
                     return
                 kind, msg, number = self._outbox.popleft()
@@ -328,22 +162,8 @@ class WaferPlannerNode(Node):
 
     def status(self) -> dict:
         """Return the node's state (``~/get_status``)."""
-        with self._lock:
-            roadmap = self._cached.roadmap if self._cached is not None else None
-            return {
-                'ready': self._planner is not None,
-                'busy_with': self._busy_with,
-                'cell': self._cell.name if self._cell is not None else None,
-                'nodes': roadmap.node_count if roadmap is not None else 0,
-                'edges': roadmap.edge_count if roadmap is not None else 0,
-                'hash': roadmap.digest if roadmap is not None else '',
-                'seed': roadmap.seed if roadmap is not None else self.settings.seed,
-                'queue': sum(1 for kind, _ in self._backlog if kind == 'plan'),
-                'served': self._counts['served'], 'failed': self._counts['failed'],
-                'last_error': self._last_error,
-                **self._recording.status(),
-                'answers_before_recorded': self._late_records,
-            }
+        return {**self._worker.status(), **self._recording.status(),
+                'answers_before_recorded': self._late_records}
 
     def _on_get_status(self, request, response):
         response.success = True
@@ -351,15 +171,10 @@ class WaferPlannerNode(Node):
         return response
 
     def _on_rebuild(self, request, response):
-        with self._lock:
-            if any(kind == 'load' for kind, _ in self._backlog) or \
-                    self._busy_with == 'load':
-                response.success = False
-                response.message = 'a roadmap load or rebuild is already under way'
-                return response
-            self._planner = None
-            self._backlog.append(('load', None))
-            self._lock.notify()
+        if not self._worker.rebuild():
+            response.success = False
+            response.message = 'a roadmap load or rebuild is already under way'
+            return response
         response.success = True
         response.message = ('rebuild started with the current parameters; ~/get_status '
                             'reports ready when it is done')
@@ -401,10 +216,8 @@ class WaferPlannerNode(Node):
         return True, f'recording closed: {directory}'
 
     def _start_recording(self) -> bool:
-        with self._lock:
-            parent = self.settings.recording_directory
         try:
-            directory = self._recording.start(parent)
+            directory = self._recording.start(self.settings.recording_directory)
         except OSError as exc:
             self.get_logger().error(f'{exc}; planning goes on without recording')
             return False
@@ -454,8 +267,7 @@ class WaferPlannerNode(Node):
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         if hasattr(self, '_recording'):  # not while the parameters are being declared
-            with self._lock:
-                self.settings = settings
+            self.settings = settings  # read as a whole by the worker: no lock needed
             self._recording.parameters(self._parameter_values(changed))
             if 'recording.enabled' in changed and not self._switching_recording:
                 if settings.recording_enabled:
@@ -466,23 +278,12 @@ class WaferPlannerNode(Node):
 
     def destroy_node(self) -> None:
         """Close the recording, stop the worker (after its request), destroy the node."""
-        with self._lock:
-            self._stopping = True
-            self._lock.notify_all()
+        self._worker.request_stop()
         # First: a worker busy building a roadmap may outlast a launcher's patience, and
         # answers not yet published are not recorded either.
         self._log_closed(*self._stop_recording())
         self._worker.join(timeout=30.0)
         super().destroy_node()
-
-
-def _warm_up(planner) -> None:
-    """Plan once so that the compiled kernels are loaded before the first request."""
-    names = sorted(planner.cell.stations)
-    try:
-        planner.plan(names[0], names[-1])
-    except (PlanningError, IndexError):
-        pass  # a cell whose first and last stations cannot be joined still warms up
 
 
 def _descriptor(spec) -> ParameterDescriptor:
