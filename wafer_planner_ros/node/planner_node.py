@@ -191,7 +191,8 @@ class WaferPlannerNode(Node):
         # Keep recording.enabled telling the truth (without switching a second time).
         self._switching_recording = True
         try:
-            self.set_parameters([Parameter('recording.enabled', value=bool(request.data))])
+            self.set_parameters([Parameter('recording.enabled',
+                                           value=bool(self._recording.status()['recording']))])
         finally:
             self._switching_recording = False
         return response
