@@ -99,6 +99,7 @@ def test_an_unwritable_directory_is_reported_and_planning_goes_on(harness, tmp_p
     assert node.set_parameters([moved])[0].successful
     answer = harness.call('set_recording', SetBool.Request(data=True))
     assert not answer.success and str(blocker) in answer.message
+    assert node.get_parameter('recording.enabled').value is False
     status = harness.status()
     assert not status['recording'] and str(blocker) in status['recording_error']
 
