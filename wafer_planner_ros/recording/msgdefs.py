@@ -101,9 +101,3 @@ def type_hash(type_name: str) -> str:
         if entry.get('type_name') == full:
             return entry['hash_string']
     raise WaferPlannerError(f'share/{package}/msg/{name}.json has no hash for {full}')
-
-
-def full_name(type_name: str) -> str:
-    """Return ``pkg/msg/Type`` for ``pkg/Type`` or ``pkg/msg/Type``."""
-    package, name = _split(type_name)
-    return f'{package}/msg/{name}'
