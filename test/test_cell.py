@@ -119,6 +119,25 @@ BAD_VALUES = [
     ('extra', 1, 'extra', 'unknown key'),
     ('robot.wafer_radius', _DELETE, 'robot.wafer_radius', 'missing'),
     ('stations', {}, 'stations', 'non-empty'),
+    # Limits that make no physical sense: refused at load, not planned into a traceback.
+    ('robot.joint_limits.acceleration', [1e-300, 16.8, 12.6],
+     'robot.joint_limits.acceleration[0]', 'too small'),
+    ('robot.joint_limits.velocity', [4.2, 5e-324, 6.3], 'robot.joint_limits.velocity[1]',
+     'too small'),
+    ('robot.joint_limits.jerk', [84.0, 168.0, 1e-9], 'robot.joint_limits.jerk[2]',
+     'too small'),
+    ('robot.wafer_acceleration_limit', [0.981, 1e-12], 'robot.wafer_acceleration_limit[1]',
+     'too small'),
+    ('robot.wafer_acceleration_norm_limit', 1e-300, 'robot.wafer_acceleration_norm_limit',
+     'too small'),
+    ('robot.joint_limits.position', [[-1e300, 3], [-3, 3], [-3, 3]],
+     'robot.joint_limits.position[0][0]', 'not a plausible joint limit'),
+    ('cell.boundary', [[-0.85, -0.45], [1e308, -0.45], [0.85, 0.45], [-0.85, 0.45]],
+     'cell.boundary[1][0]', 'farther out'),
+    ('robot.base', [0.0, -1e300], 'robot.base[1]', 'farther out'),
+    ('robot.clearance_margin', -0.001, 'robot.clearance_margin', 'must be >= 0'),
+    ('robot.clearance_margin', 0.05, 'stations.loadport1',
+     'within the clearance margin of 50.0 mm'),
 ]
 
 
@@ -171,3 +190,38 @@ def test_digest_ignores_layout_but_not_values(document, tmp_path):
     changed = copy.deepcopy(document)
     changed['robot']['joint_limits']['velocity'][0] = 4.0
     assert Cell.from_dict(changed).digest != a.digest
+
+
+def test_a_limit_just_inside_an_hour_of_motion_is_accepted(document):
+    doc = copy.deepcopy(document)
+    # 2 sqrt(1.88 m / a) = 3,000 s: slow, but a real (if odd) cell.
+    doc['robot']['wafer_acceleration_limit'] = [8.4e-7, 8.4e-7]
+    assert Cell.from_dict(doc).robot.wafer_acceleration_limit[0] == 8.4e-7
+
+
+def test_the_clearance_margin_is_kept_by_every_collision_test(document, default_cell):
+    doc = copy.deepcopy(document)
+    doc['robot']['clearance_margin'] = 0.005
+    cell = Cell.from_dict(doc)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-np.pi, np.pi, (20000, 3))
+    # The fast model: every clearance 5 mm less than without the margin.
+    plain = default_cell.clearance_model.body_clearance(q)
+    assert np.allclose(cell.clearance_model.body_clearance(q), plain - 0.005, rtol=0,
+                       atol=1e-12)
+    # The fcl reference agrees: in collision exactly where the plain distance is <= 5 mm
+    # (away from the edge of the band, where rounding decides).
+    distance = plain.min(axis=1)
+    clear_cut = np.abs(distance - 0.005) > 1e-6
+    found = cell.fcl_model().in_collision_many(q[clear_cut])
+    assert np.array_equal(found, distance[clear_cut] <= 0.005)
+    assert found.any() and not found.all()
+    assert 0.005 > distance[clear_cut][~found].min() - 0.005 > 0
+
+
+def test_no_margin_leaves_the_cell_digest_as_it_was(document, default_cell):
+    doc = copy.deepcopy(document)
+    doc['robot']['clearance_margin'] = 0.0
+    assert Cell.from_dict(doc).digest == default_cell.digest
+    doc['robot']['clearance_margin'] = 0.001
+    assert Cell.from_dict(doc).digest != default_cell.digest

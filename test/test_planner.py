@@ -133,3 +133,24 @@ def test_a_passed_deadline_gives_timeout(default_cell, default_roadmap):
     with pytest.raises(PlanningError) as info:
         Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock1', deadline=0.0)
     assert info.value.code is ErrorCode.TIMEOUT
+
+
+def test_a_clearance_margin_is_kept_by_roadmap_curve_and_verification(
+        default_cell, default_roadmap, roadmap_cache):
+    margin = 0.005
+    cell = replace(default_cell, robot=replace(default_cell.robot, clearance_margin=margin))
+    plain = default_cell.clearance_model
+    cached = load_or_build(cell, cache_dir=roadmap_cache)
+    assert cached.roadmap.digest != default_roadmap.digest
+    assert plain.clearance(cached.roadmap.nodes).min() > margin
+    planner, info = Planner(cell, cached.roadmap), roadmap_json(cached)
+    without = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock1')
+    assert without.metrics['min_clearance'] < margin  # 0.3 mm from a wall without one
+    for start, goal in (('loadport2', 'loadlock1'), ('loadlock2', 'loadport1')):
+        result = planner.plan(start, goal)
+        # check() tests collisions with fcl on bodies grown by the margin.
+        check(cell, plan_json(result, info, cell.robot.joint_names), result.start_q,
+              result.goal_q)
+        assert result.metrics['min_clearance'] > margin
+        t = np.linspace(0.0, result.cycle_time, 20001)
+        assert plain.clearance(result.spline.evaluate(t)).min() > margin

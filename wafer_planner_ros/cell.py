@@ -26,6 +26,13 @@ import yaml
 
 _PACKAGE = Path(__file__).resolve().parent
 
+MAX_MOTION_TIME = 3600.0
+"""s: a limit under which one motion across the cell would take longer is refused."""
+MAX_COORDINATE = 1000.0
+"""m: the largest |x| or |y| of a polygon vertex or the base (an EFEM is a few metres)."""
+MAX_JOINT_ANGLE = 100.0
+"""rad: the largest |position limit| (about 16 turns)."""
+
 
 def default_cell_path() -> Path:
     """Return the packaged default cell: from the source tree, or the install's share/."""
@@ -70,6 +77,8 @@ class Robot:
     """Wafer-centre acceleration limit on x and y (m/s^2), (2,)."""
     wafer_acceleration_norm_limit: Optional[float] = None
     """Optional limit on the wafer-centre acceleration's magnitude (m/s^2)."""
+    clearance_margin: float = 0.0
+    """Distance (m) every body keeps from every wall and obstacle; 0: touching is the limit."""
 
     @functools.cached_property
     def arm(self) -> PlanarArm:
@@ -85,6 +94,18 @@ class Robot:
     def body_names(self) -> Tuple[str, ...]:
         """Return body names for messages: '<joint> link' for each link, then 'wafer'."""
         return tuple(f'{name} link' for name in self.joint_names) + ('wafer',)
+
+    @property
+    def collision_radii(self) -> np.ndarray:
+        """
+        Return the body radii that collision and clearance tests use: grown by the margin.
+
+        A body's clearance is its spine's distance minus its radius, so growing every radius
+        by the margin makes "clearance > 0" mean "farther than the margin", everywhere at
+        once (roadmap, curve, verification); the Lipschitz constants bound the spine's
+        motion and do not change.
+        """
+        return self.body_radii + self.clearance_margin
 
     @functools.cached_property
     def lipschitz(self) -> np.ndarray:
@@ -158,21 +179,24 @@ class Cell:
         for j, obstacle in enumerate(obstacles):
             _check_inside(obstacle, boundary, f'cell.obstacles[{j}]')
         robot = _robot(top['robot'], boundary, obstacles)
-        model = ClearanceModel(robot.arm, robot.body_radii, robot.body_names, boundary, obstacles)
+        _check_motion_times(robot, boundary)
+        model = _clearance_model(robot, boundary, obstacles)
         stations = _stations(top['stations'], robot, model)
-        return cls(name=schema.text(cell['name'], 'cell.name'), boundary=boundary,
-                   obstacles=obstacles, robot=robot, stations=stations, source=source)
+        built = cls(name=schema.text(cell['name'], 'cell.name'), boundary=boundary,
+                    obstacles=obstacles, robot=robot, stations=stations, source=source)
+        built.__dict__['clearance_model'] = model  # the validated model is the one used
+        return built
 
     @functools.cached_property
     def clearance_model(self) -> ClearanceModel:
         """Return the vectorised collision/clearance model of this cell."""
-        r = self.robot
-        return ClearanceModel(r.arm, r.body_radii, r.body_names, self.boundary, self.obstacles)
+        return _clearance_model(self.robot, self.boundary, self.obstacles)
 
     def fcl_model(self):
-        """Return a new reference collision model on python-fcl."""
+        """Return a new reference collision model on python-fcl (margin included)."""
         from wafer_planner_ros.fcl_model import FclModel
-        return FclModel(self.robot.arm, self.robot.body_radii, self.boundary, self.obstacles)
+        return FclModel(self.robot.arm, self.robot.collision_radii, self.boundary,
+                        self.obstacles)
 
     def canonical(self) -> dict:
         """Return the cell as plain data, independent of file layout, comments and order."""
@@ -190,6 +214,8 @@ class Cell:
                 'jerk': None if r.limits.jerk is None else r.limits.jerk.tolist(),
                 'wafer_acceleration_limit': r.wafer_acceleration_limit.tolist(),
                 'wafer_acceleration_norm_limit': r.wafer_acceleration_norm_limit,
+                # Only when set: cells without a margin keep their digest (and roadmaps).
+                **({'clearance_margin': r.clearance_margin} if r.clearance_margin else {}),
             },
             'stations': {name: dict(s.spec) for name, s in sorted(self.stations.items())},
         }
@@ -201,8 +227,23 @@ class Cell:
         return hashlib.sha256(text.encode()).hexdigest()
 
 
+def _clearance_model(robot: Robot, boundary, obstacles) -> ClearanceModel:
+    return ClearanceModel(robot.arm, robot.body_radii, robot.body_names, boundary, obstacles,
+                          margin=robot.clearance_margin)
+
+
+def _coordinates(points: np.ndarray, path: str) -> None:
+    """Refuse a point too far out to be part of a cell (its arithmetic would overflow)."""
+    far = np.nonzero(np.abs(points) > MAX_COORDINATE)
+    if len(far[0]):
+        where = ''.join(f'[{int(k[0])}]' for k in far)
+        raise CellError(f'{path}{where}', f'{points[far][0]:.6g} m is farther out than '
+                                          f'{MAX_COORDINATE:g} m: not a plausible cell')
+
+
 def _polygon(value, path: str) -> np.ndarray:
     polygon = schema.points(value, path, minimum=3)
+    _coordinates(polygon, path)
     crossing = self_intersection(polygon)
     if crossing is not None:
         raise CellError(path, f'self-intersecting (edges {crossing[0]} and {crossing[1]} meet)')
@@ -224,8 +265,10 @@ def _check_inside(polygon: np.ndarray, boundary: np.ndarray, path: str) -> None:
 def _robot(value, boundary, obstacles) -> Robot:
     r = schema.mapping(value, 'robot', required=(
         'base', 'joint_names', 'link_lengths', 'link_radii', 'wafer_radius', 'joint_limits',
-        'wafer_acceleration_limit'), optional=('wafer_acceleration_norm_limit',))
+        'wafer_acceleration_limit'), optional=('wafer_acceleration_norm_limit',
+                                               'clearance_margin'))
     base = schema.vector(r['base'], 'robot.base', 2)
+    _coordinates(base, 'robot.base')
     if not points_in_polygon(base, boundary) or any(
             points_in_polygon(base, o) for o in obstacles):
         raise CellError('robot.base', f'{base.tolist()} is not inside the free space')
@@ -236,6 +279,9 @@ def _robot(value, boundary, obstacles) -> Robot:
     if len(set(names)) != 3:
         raise CellError('robot.joint_names', f'must be unique, got {list(names)}')
     norm = r.get('wafer_acceleration_norm_limit')
+    margin = schema.number(r.get('clearance_margin', 0.0), 'robot.clearance_margin')
+    if margin < 0.0:
+        raise CellError('robot.clearance_margin', f'must be >= 0, got {margin!r}')
     return Robot(
         base=base, joint_names=names,
         link_lengths=schema.vector(r['link_lengths'], 'robot.link_lengths', 3, positive=True),
@@ -245,7 +291,50 @@ def _robot(value, boundary, obstacles) -> Robot:
         wafer_acceleration_limit=schema.vector(
             r['wafer_acceleration_limit'], 'robot.wafer_acceleration_limit', 2, positive=True),
         wafer_acceleration_norm_limit=None if norm is None else schema.number(
-            norm, 'robot.wafer_acceleration_norm_limit', positive=True))
+            norm, 'robot.wafer_acceleration_norm_limit', positive=True),
+        clearance_margin=margin)
+
+
+def _check_motion_times(robot: Robot, boundary: np.ndarray) -> None:
+    """
+    Refuse a limit so small that no motion worth planning fits in MAX_MOTION_TIME.
+
+    Each limit alone bounds the time of a rest-to-rest motion over a distance D from
+    below: D / v, 2 sqrt(D / a), (32 D / j)^(1/3). A joint's D is its position range or a
+    full turn, whichever is less; the wafer's the diagonal of the enclosure's bounding box
+    or the arm's reach across, whichever is less. A denormal or zero-like limit would
+    otherwise reach the optimiser and the dense checks as a meaningless million-year motion.
+    """
+    limits = robot.limits
+    ranges = np.minimum(limits.position[:, 1] - limits.position[:, 0], 2.0 * np.pi)
+    span = min(float(np.hypot(*np.ptp(boundary, axis=0))), 2.0 * robot.link_lengths.sum())
+    checks = [('velocity', 'rad/s', limits.velocity, ranges, lambda d, v: d / v),
+              ('acceleration', 'rad/s^2', limits.acceleration, ranges,
+               lambda d, a: 2.0 * np.sqrt(d / a))]
+    if limits.jerk is not None:
+        checks.append(('jerk', 'rad/s^3', limits.jerk, ranges,
+                       lambda d, j: np.cbrt(32.0 * d / j)))
+    wafer = robot.wafer_acceleration_limit
+    if robot.wafer_acceleration_norm_limit is not None:
+        wafer = np.append(wafer, robot.wafer_acceleration_norm_limit)
+    checks.append(('wafer', 'm/s^2', wafer, np.full(len(wafer), span),
+                   lambda d, a: 2.0 * np.sqrt(d / a)))
+    for kind, unit, values, distances, bound in checks:
+        with np.errstate(over='ignore'):
+            times = bound(distances, values)
+        for i in np.nonzero(~(times <= MAX_MOTION_TIME))[0]:
+            if kind == 'wafer':
+                path = ('robot.wafer_acceleration_limit', 'robot.wafer_acceleration_limit',
+                        'robot.wafer_acceleration_norm_limit')[i]
+                path += f'[{i}]' if i < 2 else ''
+                what = f'moving the wafer by {distances[i]:.3g} m'
+            else:
+                path = f'robot.joint_limits.{kind}[{i}]'
+                what = (f'moving joint {robot.joint_names[i]} by '
+                        f'({distances[i]:.3g} rad)')
+            raise CellError(path, f'{values[i]:.3g} {unit} is too small: {what} would take '
+                                  f'at least {times[i]:.3g} s (more than '
+                                  f'{MAX_MOTION_TIME:.0f} s)')
 
 
 def _limits(value) -> JointLimits:
@@ -258,6 +347,11 @@ def _limits(value) -> JointLimits:
     position = np.array([schema.vector(p, f'{path}.position[{i}]', 2)
                          for i, p in enumerate(position)])
     for i, (lower, upper) in enumerate(position):
+        for k, angle in enumerate((lower, upper)):
+            if abs(angle) > MAX_JOINT_ANGLE:
+                raise CellError(f'{path}.position[{i}][{k}]',
+                                f'{angle:.6g} rad is beyond +-{MAX_JOINT_ANGLE:g} rad: not a '
+                                'plausible joint limit')
         if not lower < upper:
             raise CellError(f'{path}.position[{i}]',
                             f'lower limit {lower} must be below upper limit {upper}')
@@ -302,8 +396,7 @@ def _station(name: str, value, robot: Robot, model: ClearanceModel) -> Station:
     free = tuple(c for c, d in zip(candidates, clearance) if d > 0.0)
     if not free:
         contact = model.contact(candidates[int(np.argmax(clearance))].q)
-        depth = '' if contact.crossing else f', overlap {-contact.clearance * 1000:.1f} mm'
-        raise CellError(path, f'in collision ({contact.body} vs {contact.obstacle}{depth})')
+        raise CellError(path, f'in collision ({contact.describe()})')
     return Station(name=name, configs=free, spec=spec)
 
 

@@ -27,24 +27,40 @@ class Contact:
     body: str
     obstacle: str
     clearance: float
-    """Distance minus radius (m); <= 0 means in collision."""
+    """Distance minus radius minus margin (m); <= 0 means in collision."""
     crossing: bool
     """The body's spine crosses the obstacle's outline: the depth of overlap is unknown."""
+    margin: float = 0.0
+    """The clearance margin the model keeps (m)."""
+
+    def describe(self) -> str:
+        """Return e.g. 'wafer vs boundary, 1.2 mm overlap' for messages."""
+        pair = f'{self.body} vs {self.obstacle}'
+        distance = self.clearance + self.margin
+        if self.crossing:
+            return pair
+        if distance <= 0.0:
+            return f'{pair}, overlap {-distance * 1000:.1f} mm'
+        return (f'{pair}, {distance * 1000:.1f} mm apart: within the clearance margin of '
+                f'{self.margin * 1000:.1f} mm')
 
 
 class ClearanceModel:
     """Per-body clearance of arm configurations against the boundary and obstacles."""
 
     def __init__(self, arm: PlanarArm, body_radii, body_names, boundary, obstacles=(),
-                 obstacle_names=None):
+                 obstacle_names=None, margin: float = 0.0):
         """
         Build the model.
 
         ``body_radii``/``body_names``: the three link radii then the wafer radius (m).
         ``boundary``: (V, 2) polygon; ``obstacles``: sequence of (V_j, 2) polygons.
+        ``margin``: the distance (m) to keep; every body is grown by it, so that every
+        clearance below is the distance beyond the margin.
         """
         self.arm = arm
-        self.radii = np.asarray(body_radii, dtype=float)
+        self.margin = float(margin)
+        self.radii = np.asarray(body_radii, dtype=float) + self.margin
         self.body_names = tuple(body_names)
         polygons = [np.asarray(boundary, float)] + [np.asarray(o, float) for o in obstacles]
         self.owner_names = ('boundary',) + tuple(
@@ -111,7 +127,8 @@ class ClearanceModel:
         return Contact(body=self.body_names[body],
                        obstacle=self.owner_names[self.edge_owner[edge]],
                        clearance=float(gaps[body, edge]),
-                       crossing=bool(gaps[body, edge] == -self.radii[body]))
+                       crossing=bool(gaps[body, edge] == -self.radii[body]),
+                       margin=self.margin)
 
 
 @njit(cache=True, nogil=True)

@@ -28,6 +28,9 @@ logger = logging.getLogger(__name__)
 
 STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify')
 
+SAMPLE_PERIOD_RANGE = (0.001, 1.0)
+"""s: the shortest and longest step between returned samples (the verification's is 1 ms)."""
+
 
 @dataclass(frozen=True)
 class PlannerSettings:
@@ -44,8 +47,11 @@ class PlannerSettings:
 
     def __post_init__(self):
         """Reject unusable settings."""
-        if not (isinstance(self.sample_period, (int, float)) and 0 < self.sample_period <= 1):
-            raise ValueError(f'sample_period must be in (0, 1] s, got {self.sample_period!r}')
+        low, high = SAMPLE_PERIOD_RANGE
+        if not (isinstance(self.sample_period, (int, float))
+                and low <= self.sample_period <= high):
+            raise ValueError(f'sample_period must be in [{low}, {high}] s, got '
+                             f'{self.sample_period!r}')
         if not isinstance(self.extra_points, int) or self.extra_points < 0:
             raise ValueError(f'extra_points must be an integer >= 0, got {self.extra_points!r}')
 
@@ -146,7 +152,7 @@ class Planner:
             code = ErrorCode.START_IN_COLLISION if role == 'start' else \
                 ErrorCode.GOAL_IN_COLLISION
             raise PlanningError(code, f'{role} {q.tolist()} is in collision '
-                                      f'({contact.body} vs {contact.obstacle})')
+                                      f'({contact.describe()})')
         return Endpoint(','.join(f'{v:g}' for v in q), ((None, q),))
 
     def plan(self, start, goal, deadline: Optional[float] = None) -> PlanResult:

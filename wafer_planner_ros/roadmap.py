@@ -16,6 +16,19 @@ SAMPLER_NAMES = ('uniform', 'gaussian', 'bridge')
 STATION_SAMPLER = -1  # sampler index stored for station nodes
 
 
+MAX_NODES = 200000
+"""The largest roadmap (about 6 million edges and 2 GB while it is built)."""
+MAX_SEED = 2 ** 31 - 1
+"""Seeds are 0 to this (a ROS integer parameter holds them)."""
+
+
+def check_seed(seed) -> int:
+    """Return ``seed`` when it is an integer in [0, MAX_SEED]; raise ValueError otherwise."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ValueError(f'the seed must be an integer in [0, {MAX_SEED}], got {seed!r}'[:300])
+    return seed
+
+
 @dataclass(frozen=True)
 class RoadmapSettings:
     """How a roadmap is built; part of the cache key."""
@@ -45,6 +58,9 @@ class RoadmapSettings:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f'roadmap setting {name} must be a positive integer, '
                                  f'got {value!r}')
+        if self.nodes > MAX_NODES:
+            raise ValueError(f'roadmap setting nodes must be at most {MAX_NODES}, got '
+                             f'{self.nodes}')
         for name in ('gaussian_sigma', 'bridge_sigma', 'redundancy_radius'):
             if not getattr(self, name) > 0:
                 raise ValueError(

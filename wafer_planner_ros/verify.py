@@ -26,7 +26,7 @@ class Verification:
     ratios: Mapping[str, float] = field(default_factory=dict)
     """Largest |value| / limit of each limit (<= 1 passes)."""
     min_clearance: float = np.inf
-    """Smallest robot clearance met along the motion (m)."""
+    """Smallest distance from the robot to a wall or obstacle along the motion (m)."""
     peak_jerk: Tuple[float, ...] = ()
     """Largest |jerk| of each joint (rad/s^3)."""
     limit_samples: int = 0
@@ -67,10 +67,14 @@ def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
     ends = np.abs(np.concatenate([qd[[0, -1]], qdd[[0, -1]]])).max()
     if ends > END_TOLERANCE:
         problems.append(f'velocity or acceleration at an end is {ends:.3g}, not zero')
+    # The model's bodies are grown by the clearance margin: <= 0 is closer than the margin.
     clearance, checks = dense_clearance(spline, cell.clearance_model)
+    distance = clearance + robot.clearance_margin
     if clearance <= 0.0:
-        problems.append(f'collision (clearance {clearance * 1000:.2f} mm)')
-    return Verification(problems=tuple(problems), ratios=ratios, min_clearance=clearance,
+        problems.append(f'collision (clearance {distance * 1000:.2f} mm' + (
+            f', margin {robot.clearance_margin * 1000:.2f} mm)'
+            if robot.clearance_margin else ')'))
+    return Verification(problems=tuple(problems), ratios=ratios, min_clearance=distance,
                         peak_jerk=tuple(np.abs(qddd).max(axis=0).tolist()),
                         limit_samples=len(t), collision_samples=checks)
 

@@ -10,7 +10,7 @@ from wafer_planner_ros.cell import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError, WaferPlannerError
 from wafer_planner_ros.recording.queries import queries
 from wafer_planner_ros.recording.reading import read
-from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.roadmap import check_seed, RoadmapSettings
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
@@ -40,6 +40,10 @@ def roadmap_for(args, cell, quiet=False):
         settings = RoadmapSettings(nodes=args.nodes)
     except ValueError as exc:
         raise UsageError(f'--nodes: {exc}') from None
+    try:
+        check_seed(args.seed)
+    except ValueError as exc:
+        raise UsageError(f'--seed: {exc}') from None
     progress = None if quiet else Progress('building roadmap')
     result = load_or_build(cell, settings, args.seed, None if args.no_cache else args.cache_dir,
                            progress)

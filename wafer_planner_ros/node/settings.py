@@ -13,6 +13,8 @@ from typing import Any, Mapping, NamedTuple, Optional, Tuple
 
 from wafer_planner_ros.cache import DEFAULT_CACHE_DIR
 from wafer_planner_ros.cell import default_cell_path
+from wafer_planner_ros.planner import SAMPLE_PERIOD_RANGE
+from wafer_planner_ros.roadmap import MAX_NODES, MAX_SEED
 
 
 class Parameter(NamedTuple):
@@ -27,13 +29,15 @@ class Parameter(NamedTuple):
 
 PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('cell_file', '',
-              'cell YAML file (SPEC section 2); empty: the packaged config/efem_default.yaml'),
-    Parameter('roadmap.nodes', 1500, 'sampled roadmap nodes', 10, 200000),
-    Parameter('roadmap.seed', 0, 'roadmap random seed', 0, 2 ** 31 - 1),
+              'cell YAML file (see the README, "The cell file"); empty: the packaged '
+              'config/efem_default.yaml'),
+    Parameter('roadmap.nodes', 1500, 'sampled roadmap nodes', 10, MAX_NODES),
+    Parameter('roadmap.seed', 0, 'roadmap random seed', 0, MAX_SEED),
     Parameter('roadmap.cache_dir', str(DEFAULT_CACHE_DIR),
               'roadmap cache directory; empty disables the cache'),
     Parameter('trajectory.sample_period', 0.01,
-              'seconds between the published trajectory points (the end is added)', 0.001, 1.0),
+              'seconds between the published trajectory points (the end is added)',
+              *SAMPLE_PERIOD_RANGE),
     Parameter('planning.timeout', 2.0,
               'seconds from receipt after which a request is answered TIMEOUT', 0.01, 600.0),
     Parameter('planning.max_queue', 32,
