@@ -82,7 +82,9 @@ _DELETE = object()
 BAD_VALUES = [
     # (key path to change, new value, expected path in message, expected reason)
     ('cell.boundary', [[-0.85, -0.45], [0.85, 0.45], [0.85, -0.45], [-0.85, 0.45]],
-     'cell.boundary', 'self-intersecting'),
+     'cell.boundary', 'self-intersecting: edges 0 and 2 cross at (0.000, 0.000)'),
+    ('cell.obstacles', [[[-0.8, 0.3], [-0.7, 0.3], [-0.7, 0.4], [-0.75, 0.3], [-0.8, 0.4]]],
+     'cell.obstacles[0]', 'self-intersecting: edges 0 and 2 meet at (-0.750, 0.300)'),
     ('cell.boundary', [[0, 0], [1, 0]], 'cell.boundary', 'at least 3'),
     ('cell.boundary', [[0, 0], [1, 0], [2, 0]], 'cell.boundary', 'zero area'),
     ('cell.boundary', [[0, 0], [1, 0], [1, 'x']], 'cell.boundary[2][1]', 'must be a number'),
@@ -225,3 +227,20 @@ def test_no_margin_leaves_the_cell_digest_as_it_was(document, default_cell):
     assert Cell.from_dict(doc).digest == default_cell.digest
     doc['robot']['clearance_margin'] = 0.001
     assert Cell.from_dict(doc).digest != default_cell.digest
+
+
+def test_valid_enclosures_the_old_check_refused_are_accepted(document):
+    doc = copy.deepcopy(document)
+    # An alcove in the loadlock wall (two collinear wall edges that do not touch), written
+    # closed and with a vertex twice in a row.
+    alcove = [[-0.85, -0.45], [-0.1, -0.45], [-0.1, -0.5], [0.1, -0.5], [0.1, -0.45],
+              [0.85, -0.45], [0.85, -0.45], [0.85, 0.45], [-0.85, 0.45], [-0.85, -0.45]]
+    doc['cell']['boundary'] = alcove
+    doc['cell']['obstacles'] = [[[0.7, 0.0], [0.8, 0.0], [0.8, 0.1], [0.7, 0.1]][::-1]]
+    cell = Cell.from_dict(doc)
+    assert cell.boundary.tolist() == alcove[:6] + alcove[7:9]
+    assert cell.notes == (
+        'cell.boundary: the last point repeats the first (a closed ring) and was dropped',
+        'cell.boundary: vertex 6 repeats vertex 5 and was dropped')
+    assert cross2(cell.obstacles[0][1] - cell.obstacles[0][0],
+                  cell.obstacles[0][2] - cell.obstacles[0][1]) > 0  # made counter-clockwise

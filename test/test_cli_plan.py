@@ -2,6 +2,7 @@
 
 import json
 
+from wafer_planner_ros.cell import default_cell_path
 from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.plan import main
 
@@ -58,3 +59,54 @@ def test_planning_failure_exits_1_and_usage_errors_exit_2(roadmap_cache, capsys)
     assert code == 2
     code, _, err = _run(capsys, 'loadport1', 'loadlock1', '--sample-period', '0')
     assert code == 2 and 'sample_period' in err
+
+
+_BOMB = ('&a [x, x, x, x, x, x, x, x, x, x]', *(
+    f'&{chr(98 + i)} [{", ".join([f"*{chr(97 + i)}"] * 10)}]' for i in range(8)))
+HAZARDS = [
+    # (old text of the default cell, new text, what the message must name)
+    ('name: efem-3lp-2ll', f'name: [{", ".join(_BOMB)}]', 'cell.name'),
+    ('loadlock2: {', 'loadlock1: {', 'stations.loadlock1: duplicate key'),
+    ('wafer_radius: 0.15', f'wafer_radius: 1{"0" * 399}', 'robot.wafer_radius: '),
+    ('acceleration: [8.4,', 'acceleration: [1.0e-300,', 'robot.joint_limits.acceleration[0]'),
+    ('[[-0.85, -0.45], [0.85, -0.45], [0.85, 0.45]',
+     '[[-0.85, -0.45], [0.85, 0.45], [0.85, -0.45]',
+     'cell.boundary: self-intersecting: edges 0 and 2 cross at (0.000, 0.000)'),
+    ('[0.85, -0.45], [0.85, 0.45]', '[0.85, -0.45], [1e400, 0.45]', 'cell.boundary[2][0]'),
+]
+
+
+def test_every_cell_hazard_exits_2_with_a_short_message_naming_the_key(tmp_path, capsys):
+    text = default_cell_path().read_text()
+    for old, new, named in HAZARDS:
+        assert text.count(old) == 1, old
+        path = tmp_path / 'cell.yaml'
+        path.write_text(text.replace(old, new))
+        code, _, err = _run(capsys, '--cell', str(path), '--no-cache', 'loadport1',
+                            'loadlock1')
+        assert code == 2, err
+        assert named in err and len(err.encode()) < 4096, err[:500]
+        assert 'Traceback' not in err
+
+
+def test_options_out_of_range_exit_2_naming_them(capsys):
+    for option, value in (('--seed', '-5'), ('--seed', '1' * 40), ('--nodes', '1' * 30),
+                          ('--sample-period', '1e-300')):
+        code, _, err = _run(capsys, option, value, '--no-cache', 'loadport1', 'loadlock1')
+        assert code == 2 and option in err and len(err) < 4096, err
+
+
+def test_a_closed_ring_is_accepted_with_a_warning(roadmap_cache, tmp_path, capsys):
+    text = default_cell_path().read_text()
+    old = '[-0.85, 0.45]]'
+    path = tmp_path / 'closed.yaml'
+    path.write_text(text.replace(old, '[-0.85, 0.45], [-0.85, -0.45]]', 1))
+    code, out, err = _run(capsys, '--cell', str(path), '--cache-dir', str(roadmap_cache),
+                          '--json', '-', 'loadport2', 'loadlock2')
+    assert code == 0, err
+    assert (f'warning: {path}: cell.boundary: the last point repeats the first (a closed '
+            'ring) and was dropped') in err
+    # The same cell as the default one: the same roadmap.
+    default = json.loads(_run(capsys, '--cache-dir', str(roadmap_cache), '--json', '-',
+                              'loadport2', 'loadlock2')[1])
+    assert json.loads(out)['roadmap']['hash'] == default['roadmap']['hash']

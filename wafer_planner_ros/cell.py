@@ -16,13 +16,13 @@ from typing import Mapping, Optional, Tuple
 
 import numpy as np
 from wafer_planner_ros import schema
+from wafer_planner_ros.cell_file import read_cell_yaml
 from wafer_planner_ros.clearance import ClearanceModel
 from wafer_planner_ros.errors import CellError
-from wafer_planner_ros.geometry import points_in_polygon, segments_intersect
-from wafer_planner_ros.geometry import self_intersection, signed_area
+from wafer_planner_ros.geometry import points_in_polygon
 from wafer_planner_ros.kinematics import IkSolution, PlanarArm
 from wafer_planner_ros.lipschitz import body_constants
-import yaml
+from wafer_planner_ros.polygons import PolygonError, simple_polygon, touches_or_overlaps
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -145,6 +145,8 @@ class Cell:
     stations: Mapping[str, Station]
     source: Optional[str] = None
     """The file the cell was loaded from."""
+    notes: Tuple[str, ...] = ()
+    """What was dropped while reading it (a closing point, a repeated vertex), for a warning."""
 
     @classmethod
     def from_yaml(cls, path) -> 'Cell':
@@ -159,11 +161,7 @@ class Cell:
     @classmethod
     def from_text(cls, text, source: str) -> 'Cell':
         """Validate the text (str or bytes) of a cell file read from ``source``."""
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise CellError(source, f'not valid YAML: {exc}') from None
-        return cls.from_dict(data, source=source)
+        return cls.from_dict(read_cell_yaml(text, source), source=source)
 
     @classmethod
     def from_dict(cls, data, source=None) -> 'Cell':
@@ -171,11 +169,13 @@ class Cell:
         top = schema.mapping(data, '', required=('cell', 'robot', 'stations'))
         cell = schema.mapping(top['cell'], 'cell', required=('name', 'boundary'),
                               optional=('obstacles',))
-        boundary = _polygon(cell['boundary'], 'cell.boundary')
+        notes = []
+        boundary = _polygon(cell['boundary'], 'cell.boundary', notes)
         obstacles = cell.get('obstacles') or []
         if not isinstance(obstacles, list):
             raise CellError('cell.obstacles', 'must be a list of polygons')
-        obstacles = tuple(_polygon(o, f'cell.obstacles[{j}]') for j, o in enumerate(obstacles))
+        obstacles = tuple(_polygon(o, f'cell.obstacles[{j}]', notes)
+                          for j, o in enumerate(obstacles))
         for j, obstacle in enumerate(obstacles):
             _check_inside(obstacle, boundary, f'cell.obstacles[{j}]')
         robot = _robot(top['robot'], boundary, obstacles)
@@ -183,7 +183,8 @@ class Cell:
         model = _clearance_model(robot, boundary, obstacles)
         stations = _stations(top['stations'], robot, model)
         built = cls(name=schema.text(cell['name'], 'cell.name'), boundary=boundary,
-                    obstacles=obstacles, robot=robot, stations=stations, source=source)
+                    obstacles=obstacles, robot=robot, stations=stations, source=source,
+                    notes=tuple(notes))
         built.__dict__['clearance_model'] = model  # the validated model is the one used
         return built
 
@@ -241,24 +242,21 @@ def _coordinates(points: np.ndarray, path: str) -> None:
                                           f'{MAX_COORDINATE:g} m: not a plausible cell')
 
 
-def _polygon(value, path: str) -> np.ndarray:
-    polygon = schema.points(value, path, minimum=3)
-    _coordinates(polygon, path)
-    crossing = self_intersection(polygon)
-    if crossing is not None:
-        raise CellError(path, f'self-intersecting (edges {crossing[0]} and {crossing[1]} meet)')
-    area = signed_area(polygon)
-    if abs(area) < 1e-12:
-        raise CellError(path, 'has zero area')
-    return polygon if area > 0 else polygon[::-1].copy()
+def _polygon(value, path: str, notes: list) -> np.ndarray:
+    """Return a valid polygon, counter-clockwise; add what was dropped from it to notes."""
+    points = schema.points(value, path, minimum=3)
+    _coordinates(points, path)
+    try:
+        polygon = simple_polygon(points)
+    except PolygonError as exc:
+        raise CellError(path, exc.reason) from None
+    notes.extend(f'{path}: {note}' for note in polygon.notes)
+    return polygon.points
 
 
 def _check_inside(polygon: np.ndarray, boundary: np.ndarray, path: str) -> None:
     """Reject an obstacle wholly outside the boundary (one touching a wall is fine)."""
-    start, end = polygon, np.roll(polygon, -1, axis=0)
-    b_start, b_end = boundary, np.roll(boundary, -1, axis=0)
-    crosses = segments_intersect(start[:, None], end[:, None], b_start, b_end)
-    if not crosses.any() and not points_in_polygon(polygon, boundary).any():
+    if not touches_or_overlaps(polygon, boundary):
         raise CellError(path, 'lies outside cell.boundary')
 
 
@@ -274,10 +272,11 @@ def _robot(value, boundary, obstacles) -> Robot:
         raise CellError('robot.base', f'{base.tolist()} is not inside the free space')
     names = r['joint_names']
     if not isinstance(names, list) or len(names) != 3:
-        raise CellError('robot.joint_names', f'must be a list of 3 names, got {names!r}')
+        raise CellError('robot.joint_names',
+                        f'must be a list of 3 names, got {schema.brief(names)}')
     names = tuple(schema.text(n, f'robot.joint_names[{i}]') for i, n in enumerate(names))
     if len(set(names)) != 3:
-        raise CellError('robot.joint_names', f'must be unique, got {list(names)}')
+        raise CellError('robot.joint_names', f'must be unique, got {schema.brief(list(names))}')
     norm = r.get('wafer_acceleration_norm_limit')
     margin = schema.number(r.get('clearance_margin', 0.0), 'robot.clearance_margin')
     if margin < 0.0:
@@ -389,7 +388,7 @@ def _station(name: str, value, robot: Robot, model: ClearanceModel) -> Station:
         heading = schema.number(s['heading'], f'{path}.heading')
         elbow = s.get('elbow')
         if elbow is not None and (isinstance(elbow, bool) or elbow not in (1, -1)):
-            raise CellError(f'{path}.elbow', f'must be 1 or -1, got {elbow!r}')
+            raise CellError(f'{path}.elbow', f'must be 1 or -1, got {schema.brief(elbow)}')
         candidates = _reach(robot, centre, heading, elbow, path)
         spec = {'wafer_center': centre.tolist(), 'heading': heading, 'elbow': elbow}
     clearance = model.body_clearance(np.array([c.q for c in candidates])).min(axis=1)

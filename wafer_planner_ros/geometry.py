@@ -8,37 +8,9 @@ def cross2(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
-def signed_area(polygon: np.ndarray) -> float:
-    """Return the shoelace area of a closed polygon, positive when counter-clockwise."""
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
 def polygon_edges(polygon: np.ndarray) -> tuple:
     """Return the start and end points (each (E, 2)) of a closed polygon's edges."""
     return polygon, np.roll(polygon, -1, axis=0)
-
-
-def segments_intersect(a, b, c, d) -> np.ndarray:
-    """Return whether segment a-b touches or crosses segment c-d (broadcasting)."""
-    o1 = cross2(b - a, c - a)
-    o2 = cross2(b - a, d - a)
-    o3 = cross2(d - c, a - c)
-    o4 = cross2(d - c, b - c)
-    return (o1 * o2 <= 0.0) & (o3 * o4 <= 0.0)
-
-
-def self_intersection(polygon: np.ndarray):
-    """Return (i, j) of two non-adjacent edges that touch, or None for a simple polygon."""
-    start, end = polygon_edges(polygon)
-    n = len(polygon)
-    for i in range(n):
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
-                continue  # adjacent through the closing edge
-            if segments_intersect(start[i], end[i], start[j], end[j]):
-                return i, j
-    return None
 
 
 def point_segment_distance(p, a, ab, ab_sq) -> np.ndarray:

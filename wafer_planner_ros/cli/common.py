@@ -29,9 +29,12 @@ def add_roadmap_options(parser: argparse.ArgumentParser) -> None:
 def load_cell(args):
     """Return the cell named by --cell; raise UsageError with the validation message."""
     try:
-        return Cell.from_yaml(args.cell or default_cell_path())
+        cell = Cell.from_yaml(args.cell or default_cell_path())
     except CellError as exc:
         raise UsageError(f'bad cell file: {exc}') from None
+    for note in cell.notes:
+        print(f'warning: {cell.source}: {note}', file=sys.stderr)
+    return cell
 
 
 def roadmap_for(args, cell, quiet=False):
