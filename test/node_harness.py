@@ -6,7 +6,7 @@ import tempfile
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import rclpy
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -34,6 +34,9 @@ class Peer:
         self.context = context
         self.peer = Node('test_peer', context=self.context)
         self.results, self.trajectories, self.roadmap_markers = [], [], []
+        self.diagnostics = []
+        self.peer.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append,
+                                      10)
         self.peer.create_subscription(DiagnosticStatus, '/wafer_planner/result',
                                       self.results.append, RELIABLE)
         self.peer.create_subscription(JointTrajectory, '/wafer_planner/trajectory',
@@ -54,7 +57,7 @@ class Peer:
         wait_for(lambda: self.joint_pub.get_subscription_count() > 0
                  and self.station_pub.get_subscription_count() > 0
                  and all(c.service_is_ready() for c in self.clients.values()), 20.0)
-        wait_for(lambda: self.status()['ready'], 120.0)
+        wait_for(lambda: self.status()['ready'] and self.status()['busy_with'] != 'load', 120.0)
 
     def subscribe_markers(self) -> list:
         """Subscribe to the roadmap markers now (a late subscriber); return the inbox."""
@@ -85,6 +88,11 @@ class Peer:
         msg.points = [JointTrajectoryPoint(positions=[float(v) for v in start]),
                       JointTrajectoryPoint(positions=[float(v) for v in goal])]
         self.joint_pub.publish(msg)
+
+    def health(self, since: int, timeout: float = 10.0) -> DiagnosticStatus:
+        """Wait for and return the node's first health status after ``since`` received."""
+        wait_for(lambda: len(self.diagnostics) > since, timeout)
+        return self.diagnostics[since].status[0]
 
     def result(self, request_id: str, timeout: float = 60.0) -> DiagnosticStatus:
         """Wait for and return the one result of a request."""

@@ -1,7 +1,12 @@
 """The roadmap cache: hits, and every kind of bad file reported and rebuilt."""
 
 import logging
+import os
 import shutil
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -102,3 +107,55 @@ def test_unwritable_cache_still_builds(default_cell, tmp_path, caplog):
 def test_disabled_cache_builds_without_files(default_cell, tmp_path):
     result = load_or_build(default_cell, SMALL, 3, None)
     assert result.status is CacheStatus.DISABLED and result.path is None
+
+
+_KILLED_WRITER = """
+import os, signal, sys
+from pathlib import Path
+from types import SimpleNamespace
+import numpy as np
+from wafer_planner_ros import cache
+from wafer_planner_ros.roadmap import RoadmapSettings
+
+
+def savez(stream, **arrays):  # killed half way through writing, as by SIGKILL or OOM
+    stream.write(b'PK' + bytes(5000))
+    stream.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+np.savez = savez
+roadmap = SimpleNamespace(digest='d', seed=0, settings=RoadmapSettings(), stations={},
+                          stats={}, arrays=dict)
+cache.save(roadmap, Path(sys.argv[1]), 'key', 'cell')
+"""
+
+
+def _killed_writer(path) -> list:
+    """Run ``cache.save`` to ``path`` in a process killed while writing; return what it left."""
+    before = set(path.parent.glob('*'))
+    run = subprocess.run([sys.executable, '-c', _KILLED_WRITER, str(path)], timeout=60)
+    assert run.returncode == -signal.SIGKILL
+    return sorted(set(path.parent.glob('*')) - before)
+
+
+def test_a_killed_writers_temporary_file_is_removed_once_stale(default_cell, built, caplog):
+    first, folder = built
+    (old,) = _killed_writer(first.path)
+    assert old.name.startswith(first.path.name) and old.stat().st_size >= 5000
+    (recent,) = _killed_writer(folder / 'roadmap-0123456789abcdef.npz')
+    kept = [folder / 'notes.tmp', folder / 'roadmap-old.txt']  # not the cache's
+    stale = time.time() - cache.STALE_TMP - 60
+    for path in kept:
+        path.write_text('someone else')
+    for path in (old, *kept):
+        os.utime(path, (stale, stale))
+    with caplog.at_level(logging.INFO, logger='wafer_planner_ros.cache'):
+        again = load_or_build(default_cell, SMALL, 3, folder)
+    assert again.hit
+    assert not old.exists() and recent.exists() and all(path.exists() for path in kept)
+    assert [r.getMessage() for r in caplog.records if str(old) in r.getMessage()]
+    assert not [r for r in caplog.records if str(recent) in r.getMessage()]
+    # One still being written (changed just now) is never taken for a killed writer's.
+    assert cache.remove_stale_tmp(folder) == []
+    assert cache.remove_stale_tmp(folder, time.time() + cache.STALE_TMP + 1) == [recent]

@@ -1,5 +1,7 @@
 """The planning node in-process: requests, answers, markers, services, bad input, load."""
 
+import threading
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from independent import check
 from node_harness import values, wait_for
@@ -75,6 +77,31 @@ def test_joint_request_in_any_joint_order(harness, default_cell):
     ('raw', '', '', 'INVALID_REQUEST'),
     ('raw', '', '[1, 2, 3]', 'INVALID_REQUEST'),
     ('raw', '', 'x' * 200000, 'INVALID_REQUEST'),
+    # Found by a fuzzer: an integer no float holds once ended the node (OverflowError).
+    ('stations', 'b16', {'id': 'b16', 'from': [10 ** 400, 0, 0], 'to': 'loadlock1'},
+     'NOT_FINITE'),
+    ('raw', 'b17', '{"id": "b17", "from": [0, NaN, 0], "to": "loadlock1"}', 'NOT_FINITE'),
+    ('raw', 'b18', '{"id": "b18", "from": "loadport1", "to": [0, 0, -Infinity]}',
+     'NOT_FINITE'),
+    ('raw', 'b19', '{"id": "b19", "from": [1e400, 0, 0], "to": "loadlock1"}', 'NOT_FINITE'),
+    ('raw', '', '{"id": ' + '1' * 5000 + ', "from": "loadport1", "to": "loadlock1"}',
+     'INVALID_REQUEST'),
+    ('raw', '', '[' * 60000, 'INVALID_REQUEST'),
+    ('stations', 'b20', {'id': 'b20', 'from': 'loadport1', 'to': 'loadlock1', 'speed': 2},
+     'INVALID_REQUEST'),
+    ('stations', 'b21', {'id': 'b21', 'from': [0.1, 0.2, 0.3, 0.4], 'to': 'loadlock1'},
+     'JOINT_MISMATCH'),
+    ('stations', '', {'id': 17, 'from': 'loadport1', 'to': 'loadlock1'}, 'INVALID_REQUEST'),
+    ('stations', '', {'id': 'i' * 60000, 'from': 'loadport1', 'to': 'loadlock1'},
+     'INVALID_REQUEST'),
+    ('stations', 'b22', {'id': 'b22', 'from': 'p' * 60000, 'to': 'loadlock1'},
+     'INVALID_REQUEST'),
+    ('raw', '', '{"id": "\\ud800", "from": "loadport1", "to": "loadlock1"}',
+     'INVALID_REQUEST'),
+    ('joints', 'b23', ([1e308, 0.0, 0.0], [0.1, 0.2, 0.3]), 'OUT_OF_LIMITS'),
+    ('frame', '', 'x' * 100000, 'INVALID_REQUEST'),
+    ('bytes', '', b'\x00\x01\x00\x00\xff\xff\xff\x7fgarbage', 'INVALID_REQUEST'),
+    ('joint bytes', '', b'\x00\x01\x00\x00garbage', 'INVALID_REQUEST'),
 ])
 def test_every_bad_input_gets_one_error_and_the_node_serves_on(
         harness, kind, request_id, payload, code):
@@ -86,6 +113,12 @@ def test_every_bad_input_gets_one_error_and_the_node_serves_on(
         harness.send_joints(request_id, *payload)
     elif kind == 'raw':
         harness.station_pub.publish(String(data=payload))
+    elif kind == 'bytes':
+        harness.station_pub.publish(payload)  # not a String at all
+    elif kind == 'joint bytes':
+        harness.joint_pub.publish(payload)
+    elif kind == 'frame':
+        harness.send_joints(payload, [0.1, 0.2, 0.3], [0.2, 0.3, 0.4])
     else:
         msg = JointTrajectory()
         msg.header.frame_id = request_id
@@ -101,12 +134,13 @@ def test_every_bad_input_gets_one_error_and_the_node_serves_on(
     assert result.level == DiagnosticStatus.ERROR
     assert values(result)['code'] == code, result.message
     assert result.message.startswith(code)
+    assert len(result.message) < 1000 and all(len(kv.value) < 1000 for kv in result.values)
     # Exactly one answer, and the node still plans.
-    harness.send_stations({'id': f'after-{request_id or kind}-{code}', 'from': 'loadport3',
-                           'to': 'loadlock2'})
-    after = harness.result(f'after-{request_id or kind}-{code}')
+    after_id = f'after-{request_id or kind}-{code}-{before}'  # unique: cases share ids
+    harness.send_stations({'id': after_id, 'from': 'loadport3', 'to': 'loadlock2'})
+    after = harness.result(after_id)
     assert after.level == DiagnosticStatus.OK
-    assert sum(1 for r in harness.results[before:] if r.name == request_id) == 1
+    assert [r.name for r in harness.results[before:]] == [request_id, after_id]
 
 
 def test_late_subscriber_gets_the_roadmap_markers(harness, default_cell):
@@ -122,24 +156,206 @@ def test_late_subscriber_gets_the_roadmap_markers(harness, default_cell):
     assert all(m.header.frame_id == 'efem' for m in inbox[0].markers)
 
 
-def test_services_answer(harness):
+def test_services_answer(harness, monkeypatch):
+    from wafer_planner_ros.node import worker
     status = harness.status()
-    for key in ('ready', 'nodes', 'edges', 'hash', 'seed', 'queue', 'served', 'failed',
-                'last_error'):
+    for key in ('ready', 'busy_with', 'cell', 'nodes', 'edges', 'hash', 'seed', 'queue',
+                'served', 'failed', 'last_error', 'rebuild_failed', 'last_rebuild_error'):
         assert key in status
     assert status['ready'] and status['nodes'] == 1510 and status['edges'] == 40885
-    rebuilt = harness.call('rebuild_roadmap')
-    assert rebuilt.success, rebuilt.message
-    # While it runs: status answers, a second rebuild is refused, requests are not ready.
-    during = harness.status()
-    assert not during['ready']
-    assert not harness.call('rebuild_roadmap').success
-    harness.send_stations({'id': 'during-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
-    assert values(harness.result('during-rebuild'))['code'] == 'ROADMAP_NOT_READY'
-    wait_for(lambda: harness.status()['ready'], 120)
-    assert harness.status()['hash'] == status['hash']  # same parameters, same roadmap
+    assert not status['rebuild_failed'] and status['last_rebuild_error'] == ''
+    release = threading.Event()
+    load_or_build = worker.load_or_build
+
+    def held(*args, **kwargs):  # a rebuild that lasts until the test has looked at it
+        release.wait(120)
+        return load_or_build(*args, **kwargs)
+
+    monkeypatch.setattr(worker, 'load_or_build', held)
+    try:
+        rebuilt = harness.call('rebuild_roadmap')
+        assert rebuilt.success, rebuilt.message
+        # While it runs: status answers, a second rebuild is refused, and requests are
+        # planned on the previous roadmap.
+        during = harness.status()
+        assert during['ready'] and during['busy_with'] == 'load'
+        assert during['hash'] == status['hash']
+        assert not harness.call('rebuild_roadmap').success
+        harness.send_stations({'id': 'during-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
+        answer = harness.result('during-rebuild')
+        assert answer.level == DiagnosticStatus.OK, answer.message
+        assert values(answer)['roadmap_hash'] == status['hash']
+        assert harness.status()['busy_with'] == 'load'  # answered during the rebuild
+    finally:
+        release.set()
+    wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+    after = harness.status()
+    assert after['ready'] and not after['rebuild_failed']
+    assert after['hash'] == status['hash']  # same parameters, same roadmap
     harness.send_stations({'id': 'after-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
     assert harness.result('after-rebuild').level == DiagnosticStatus.OK
+
+
+@pytest.mark.parametrize('bad', ['missing', 'invalid', 'unbuildable'])
+def test_a_failed_rebuild_keeps_serving_the_last_good_roadmap(harness, tmp_path, monkeypatch,
+                                                              bad):
+    from rclpy.parameter import Parameter
+    from wafer_planner_ros.node import worker
+    before = harness.status()
+    assert before['ready'] and not before['rebuild_failed']
+    cell_file = tmp_path / f'{bad}.yaml'
+    if bad == 'invalid':
+        cell_file.write_text('robot: [unclosed\n')
+        why = f'{cell_file}: not valid YAML'
+    elif bad == 'unbuildable':
+        cell_file = ''  # the good cell, whose roadmap cannot be built this time
+
+        def broken(*args, **kwargs):
+            raise RuntimeError('no roadmap today')
+        monkeypatch.setattr(worker, 'load_or_build', broken)
+        why = 'internal error: RuntimeError: no roadmap today'
+    else:
+        why = f"No such file or directory: '{cell_file}'"
+    node = harness.node
+    try:
+        assert node.set_parameters([Parameter('cell_file', value=str(cell_file))])[0].successful
+        assert harness.call('rebuild_roadmap').success  # answers at once, as ever
+        wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+        status = harness.status()
+        assert status['ready'] and status['rebuild_failed'], status
+        assert why in status['last_rebuild_error'], status['last_rebuild_error']
+        assert status['hash'] == before['hash'] and status['cell'] == before['cell']
+        assert status['nodes'] == before['nodes']
+        harness.send_stations({'id': f'old-{bad}', 'from': 'loadport2', 'to': 'loadlock1'})
+        answer = harness.result(f'old-{bad}')
+        assert answer.level == DiagnosticStatus.OK, answer.message
+        assert values(answer)['roadmap_hash'] == before['hash']
+        health = harness.health(len(harness.diagnostics))
+        assert health.level == DiagnosticStatus.WARN
+        assert health.message == (f"rebuild failed: {status['last_rebuild_error']}; serving "
+                                  f"the previous roadmap {before['hash'][:12]}")
+        assert values(health)['rebuild_failed'] == 'True'
+    finally:
+        monkeypatch.undo()
+        node.set_parameters([Parameter('cell_file', value='')])
+        wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+        assert harness.call('rebuild_roadmap').success
+        wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+    # A good rebuild clears it.
+    status = harness.status()
+    assert status['ready'] and not status['rebuild_failed'] and not status['last_rebuild_error']
+    assert status['hash'] == before['hash']
+    health = harness.health(len(harness.diagnostics))
+    assert health.level == DiagnosticStatus.OK and health.message == 'ready'
+
+
+def test_each_request_is_planned_on_the_roadmap_in_force_when_it_arrived(
+        harness, monkeypatch):
+    from rclpy.parameter import Parameter
+    from wafer_planner_ros.planner import Planner
+    old = harness.status()['hash']
+    plan, release, planning = Planner.plan, threading.Event(), threading.Event()
+
+    def held(planner, start, goal, **kwargs):  # keeps the first request planning
+        if (start, goal) == ('loadport2', 'loadlock1') and not planning.is_set():
+            planning.set()
+            release.wait(60)
+        return plan(planner, start, goal, **kwargs)
+
+    monkeypatch.setattr(Planner, 'plan', held)
+    node = harness.node
+    try:
+        harness.send_stations({'id': 'r-a', 'from': 'loadport2', 'to': 'loadlock1'})
+        wait_for(planning.is_set, 30)
+        harness.send_stations({'id': 'r-b', 'from': 'loadport1', 'to': 'loadlock2'})
+        wait_for(lambda: harness.status()['queue'] == 1, 30)  # b waits behind a
+        node.set_parameters([Parameter('roadmap.seed', value=1)])
+        assert harness.call('rebuild_roadmap').success
+        wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+        new = harness.status()['hash']
+        assert new != old
+        harness.send_stations({'id': 'r-c', 'from': 'loadport1', 'to': 'loadlock2'})
+        wait_for(lambda: harness.status()['queue'] == 2, 30)
+        release.set()
+        hashes = {i: values(harness.result(i))['roadmap_hash'] for i in ('r-a', 'r-b', 'r-c')}
+        # As a recording pairs them: a and b arrived before the new roadmap, c after.
+        assert hashes == {'r-a': old, 'r-b': old, 'r-c': new}
+    finally:
+        release.set()
+        monkeypatch.undo()
+        node.set_parameters([Parameter('roadmap.seed', value=0)])
+        wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+        assert harness.call('rebuild_roadmap').success
+        wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
+    assert harness.status()['hash'] == old
+
+
+def test_the_fuzzers_overflowing_request_leaves_the_node_serving(harness):
+    failed = harness.status()['failed']
+    harness.station_pub.publish(String(
+        data='{"id": "x-overflow", "from": [1' + '0' * 400 + ', 0, 0], "to": "loadlock1"}'))
+    answer = harness.result('x-overflow')
+    assert answer.level == DiagnosticStatus.ERROR
+    assert answer.message == 'NOT_FINITE: "from"[0] is not a finite number (401 digits)'
+    status = harness.status()  # ~/get_status answers
+    assert status['ready'] and status['failed'] == failed + 1
+    harness.send_stations({'id': 'x-next', 'from': 'loadport1', 'to': 'loadlock2'})
+    assert harness.result('x-next').level == DiagnosticStatus.OK
+    assert sum(1 for r in harness.results if r.name == 'x-overflow') == 1
+
+
+def _once(original, exc):
+    """Return ``original`` that raises ``exc`` the first time it is called."""
+    calls = []
+
+    def failing(*args, **kwargs):
+        if not calls:
+            calls.append(1)
+            raise exc
+        return original(*args, **kwargs)
+    return failing
+
+
+@pytest.mark.parametrize('where, to, code, says', [
+    ('Planner.plan', 'loadlock1', 'INTERNAL',
+     'INTERNAL: internal error while planning: RuntimeError: injected'),
+    ('messages.trajectory', 'loadlock1', 'INTERNAL',
+     'INTERNAL: internal error while answering: OverflowError: injected'),
+    ('messages.result_status', 'loadlock1', 'INTERNAL',
+     'INTERNAL: internal error while answering: OverflowError: injected'),
+    ('planner_node.request_of', 'loadlock1', 'INTERNAL',
+     'INTERNAL: internal error while reading the request: RuntimeError: injected'),
+    ('messages.error_values', 'loadport9', 'INTERNAL',
+     'INTERNAL: internal error: answering UNKNOWN_STATION failed: RuntimeError: injected'),
+    ('markers.path_markers', 'loadlock1', 'OK', 'ok: loadport3 -> loadlock1'),
+    ('recording.answer', 'loadlock1', 'OK', 'ok: loadport3 -> loadlock1'),
+])
+def test_a_failure_while_answering_is_one_internal_answer_and_the_node_serves_on(
+        harness, monkeypatch, where, to, code, says):
+    from wafer_planner_ros.node import markers, messages, planner_node
+    from wafer_planner_ros.planner import Planner
+    owners = {'Planner': Planner, 'messages': messages, 'markers': markers,
+              'planner_node': planner_node, 'recording': harness.node._recording}
+    owner, name = where.split('.')
+    exc = OverflowError('injected') if 'trajectory' in where or 'status' in where else \
+        RuntimeError('injected')
+    monkeypatch.setattr(owners[owner], name, _once(getattr(owners[owner], name), exc))
+    request_id = f'inject-{where}'
+    before = len(harness.results)
+    harness.send_stations({'id': request_id, 'from': 'loadport3', 'to': to})
+    wait_for(lambda: len(harness.results) > before, 60)
+    answer = harness.results[before]
+    # Failed before the id was read: the answer cannot name it.
+    assert answer.name == ('' if 'request_of' in where else request_id)
+    assert values(answer)['code'] == code and answer.message.startswith(says), answer.message
+    harness.send_stations({'id': f'{request_id}-next', 'from': 'loadport1', 'to': 'loadlock2'})
+    assert harness.result(f'{request_id}-next').level == DiagnosticStatus.OK
+    # The next answer is in: a second answer to the first would have come before it.
+    assert [r.name for r in harness.results[before:]] == [answer.name, f'{request_id}-next']
+    if code == 'OK':
+        wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
+    else:
+        assert not any(t.header.frame_id == request_id for t in harness.trajectories)
 
 
 def test_parameters_are_checked(harness):

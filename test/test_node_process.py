@@ -14,9 +14,22 @@ pytest.importorskip('rclpy')
 def dds_env(tmp_path):
     """Return an environment confined to loopback and a domain of this test run."""
     env = dict(os.environ)
-    env.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               ROS_DOMAIN_ID=str(100 + os.getpid() % 100), ROS_LOG_DIR=str(tmp_path / 'log'))
+    env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))  # a run may pick its own
+    env.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path / 'log'))
     return env
+
+
+# A peer sending the request, found by a fuzzer, that once ended the node: an integer no
+# float holds (the client's own JSON writes it in full).
+OVERFLOWING = """
+import rclpy
+from wafer_planner_ros.node.client import _Client
+rclpy.init()
+answer = _Client('/wafer_planner').ask(
+    {'id': 'overflow', 'from': [10 ** 400, 0, 0], 'to': 'loadlock1'}, 120)
+print(answer[0].message if answer else 'no answer')
+rclpy.try_shutdown()
+"""
 
 
 def _client(env, *args):
@@ -40,6 +53,13 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
         bad = _client(dds_env, 'loadport1', 'nowhere', '--id', 'p2')
         assert bad.returncode == 1
         assert 'UNKNOWN_STATION' in bad.stdout
+        fuzzed = subprocess.run([sys.executable, '-c', OVERFLOWING], env=dds_env,
+                                capture_output=True, text=True, timeout=300)
+        assert fuzzed.stdout.strip() == \
+            'NOT_FINITE: "from"[0] is not a finite number (401 digits)', fuzzed.stderr
+        assert node.poll() is None  # still running, still ready and answering
+        again = _client(dds_env, 'loadport2', 'loadlock1', '--id', 'p3')
+        assert again.returncode == 0, again.stdout + again.stderr
     finally:
         node.send_signal(signal.SIGINT)
         output, _ = node.communicate(timeout=60)

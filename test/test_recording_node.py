@@ -1,6 +1,7 @@
 """The node's recording in-process: what it holds, ``~/set_recording``, failures reported."""
 
 from pathlib import Path
+import shutil
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from node_harness import values, wait_for
@@ -162,3 +163,26 @@ def test_an_answer_is_in_the_file_before_it_is_published(harness):
         assert (numbers[request_id], topic) in in_file
     trajectory_at_publish = seen[0][2]
     assert (numbers['d1'], '/wafer_planner/result') in trajectory_at_publish  # both at once
+
+
+def test_a_deleted_recording_directory_shows_as_warn_within_one_request(harness):
+    """``rm -rf`` of the bag being written: stopped, said so, counted; planning goes on."""
+    inbox = []
+    harness.peer.create_subscription(DiagnosticArray, '/diagnostics', inbox.append, 10)
+    bag = Path(harness.status()['recording_directory'])
+    assert harness.status()['recording'] and bag.is_dir()
+    shutil.rmtree(bag)
+    harness.send_stations({'id': 'into-the-void', 'from': 'loadport2', 'to': 'loadlock1'})
+    assert values(harness.result('into-the-void'))['code'] == 'OK'
+    status = harness.status()
+    assert not status['recording'] and status['recording_lost'] == 1
+    assert status['recording_error'] == \
+        f'recording stopped: {bag} was deleted; 1 answer not recorded'
+
+    def warned() -> bool:
+        return any(s.level == DiagnosticStatus.WARN and f'{bag} was deleted' in s.message
+                   for array in inbox for s in array.status)
+    wait_for(warned, 5)  # published once a second
+    assert not bag.exists()
+    assert _start(harness) != bag
+    assert harness.status()['recording'] and not harness.status()['recording_error']

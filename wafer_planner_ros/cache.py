@@ -5,7 +5,10 @@ The key is the SHA-256 of those four; the file name holds its first 16 hex digit
 file stores the whole key, the cell's digest and the roadmap's content digest. On load the
 key and the content digest are checked; a file that is stale (other settings, seed or
 version), from another cell, truncated or garbage is reported and rebuilt, never trusted.
-Files are written to a temporary name and renamed, so a crash never leaves half a file.
+Files are written to a temporary name and renamed, so a crash never leaves half a file;
+a temporary file that a killed writer left behind is removed once it is an hour old (a live
+writer changes its file every moment and renames it within seconds), whichever process,
+on whichever host, wrote it.
 """
 
 from dataclasses import asdict, dataclass
@@ -28,6 +31,9 @@ from wafer_planner_ros.roadmap import Roadmap, RoadmapSettings
 logger = logging.getLogger(__name__)
 
 DEFAULT_CACHE_DIR = Path.home() / '.cache' / 'wafer_planner_ros'
+TMP_SUFFIX = '.tmp'
+STALE_TMP = 3600.0
+"""Seconds since its last change after which a temporary file is a killed writer's."""
 
 
 class CacheStatus(str, enum.Enum):
@@ -77,7 +83,7 @@ def save(roadmap: Roadmap, path: Path, key: str, cell_digest: str) -> None:
             'settings': asdict(roadmap.settings), 'stations': roadmap.stations,
             'stats': roadmap.stats, 'version': __version__}
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name, suffix='.tmp', dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=TMP_SUFFIX, dir=path.parent)
     try:
         with os.fdopen(fd, 'wb') as stream:
             np.savez(stream, meta=np.array(json.dumps(meta)), **roadmap.arrays())
@@ -85,6 +91,37 @@ def save(roadmap: Roadmap, path: Path, key: str, cell_digest: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def remove_stale_tmp(cache_dir, now: Optional[float] = None) -> list:
+    """
+    Remove the temporary files of writers killed in ``cache_dir``; return their paths.
+
+    Only files named as ``save`` names them and unchanged for ``STALE_TMP`` seconds: by
+    age, not by writer pid, which another host or container sharing the cache would not
+    tell apart from a dead one.
+    """
+    now = time.time() if now is None else now
+    removed = []
+    try:
+        candidates = list(Path(cache_dir).glob(f'roadmap-*.npz*{TMP_SUFFIX}'))
+    except OSError:
+        return removed
+    for tmp in candidates:
+        try:
+            age = now - tmp.stat().st_mtime
+            if age < STALE_TMP:
+                continue
+            tmp.unlink()
+        except FileNotFoundError:  # renamed by its writer, or removed by another process
+            continue
+        except OSError as exc:
+            logger.warning('cannot remove stale roadmap cache file %s: %s', tmp, exc)
+            continue
+        logger.info('removed %s, left %.1f h ago by a roadmap cache writer that was killed',
+                    tmp, age / 3600)
+        removed.append(tmp)
+    return removed
 
 
 class _Rejected(Exception):
@@ -135,6 +172,7 @@ def load_or_build(cell, settings: RoadmapSettings = RoadmapSettings(), seed: int
         roadmap = build_roadmap(cell, settings, seed, progress)
         return CachedRoadmap(roadmap, CacheStatus.DISABLED, None,
                              time.perf_counter() - started)
+    remove_stale_tmp(cache_dir)
     key = cache_key(cell, settings, seed)
     path = cache_path(cache_dir, key)
     try:

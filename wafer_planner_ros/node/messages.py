@@ -27,8 +27,12 @@ def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> by
 def result_status(request_id: str, level: str, message: str,
                   values: Mapping[str, object]) -> bytes:
     """Return the serialised ``~/result`` status: name = request id, values as strings."""
-    return cdr.diagnostic_status(LEVELS[level], request_id, message, 'wafer_planner',
-                                 [(k, _text(v)) for k, v in values.items()])
+    texts = [(k, _text(v)) for k, v in values.items()]
+    try:
+        return cdr.diagnostic_status(LEVELS[level], request_id, message, 'wafer_planner', texts)
+    except UnicodeEncodeError:  # a lone surrogate: the answer goes out with it replaced
+        return cdr.diagnostic_status(LEVELS[level], _utf8(request_id), _utf8(message),
+                                     'wafer_planner', [(_utf8(k), _utf8(v)) for k, v in texts])
 
 
 def plan_values(result, roadmap, start, goal) -> dict:
@@ -67,3 +71,7 @@ def _text(value) -> str:
     if isinstance(value, (list, tuple)):
         return json.dumps(list(value))
     return str(value)
+
+
+def _utf8(text: str) -> str:
+    return text.encode('utf-8', 'replace').decode('utf-8')

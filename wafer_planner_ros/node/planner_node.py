@@ -2,15 +2,18 @@
 The planning node ``wafer_planner`` (SPEC section 5): a thin ROS edge around the core.
 
 Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
-publishing: every callback is short), the planning worker (``worker``: loads or rebuilds
-the roadmap and plans, one request at a time; the compiled kernels release the GIL) and the
-recorder's (``node.recording``). Requests are recorded, read and checked in the
-subscription callback, then handed to the worker. The worker hands every answer back
-through a guard condition, so all publishing happens on the executor, each answer recorded
-before it goes out; each request gets exactly one ``~/result``, whatever happens.
+publishing: every callback is short), the worker's two (``worker``: one plans, one request
+at a time, the other loads or rebuilds the roadmap while the previous one serves; the
+compiled kernels release the GIL) and the recorder's (``node.recording``). Requests are
+recorded, read and checked in the subscription callback, then handed to the worker. The
+worker hands every answer back through a guard condition, so all publishing happens on the
+executor, each answer recorded before it goes out; each request gets exactly one
+``~/result``, whatever happens: no request, however malformed, and no failure while
+answering it ends the node (a failure of the node's own is answered ``INTERNAL``).
 """
 
 from collections import deque
+import functools
 import itertools
 import json
 import sys
@@ -34,8 +37,9 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.errors import ErrorCode
+from wafer_planner_ros.node.faults import reason_of
 from wafer_planner_ros.node.recording import NodeRecording
-from wafer_planner_ros.node.requests import request_of, RequestError
+from wafer_planner_ros.node.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
@@ -49,6 +53,19 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 # The QoS profiles, as the recording's channel metadata states them.
 RELIABLE_OFFERED = qos(keep_all=True, depth=RELIABLE.depth)
 LATCHED_OFFERED = qos(depth=1, transient_local=True)
+
+
+def _service(callback):
+    """Answer a service call whose callback fails with the reason, not end the node."""
+    @functools.wraps(callback)
+    def guarded(node, request, response):
+        try:
+            return callback(node, request, response)
+        except Exception as exc:  # noqa: B902 - the node serves on
+            node.get_logger().error(f'{callback.__name__}: internal error: {exc!r}')
+            response.success, response.message = False, f'internal error: {reason_of(exc)}'
+            return response
+    return guarded
 
 
 class WaferPlannerNode(Node):
@@ -102,33 +119,50 @@ class WaferPlannerNode(Node):
     # ----------------------------------------------------------------- requests in
 
     def _on_joint_request(self, data: bytes, info) -> None:
-        received, number = time.monotonic(), next(self._numbers)
-        self._recording.request(self._joint_sub.topic_name, data, number, info)
-        msg = deserialize_message(data, JointTrajectory)
-        cell = self._worker.cell
-        if cell is None:  # the joint names cannot be checked yet: not ready, as documented
-            self._worker.answer_error(number, msg.header.frame_id,
-                                      ErrorCode.ROADMAP_NOT_READY,
-                                      'not ready: the cell is being loaded', None, None)
-            return
-        try:
-            request = request_of('joint', msg, cell.robot.joint_names)
-        except RequestError as exc:
-            self._worker.answer_error(number, exc.request_id, exc.code, exc.message, None,
-                                      None)
-            return
-        self._worker.enqueue(number, request, received)
+        self._on_request('joint', self._joint_sub.topic_name, JointTrajectory, data, info)
 
     def _on_station_request(self, data: bytes, info) -> None:
-        received, number = time.monotonic(), next(self._numbers)
-        self._recording.request(self._station_sub.topic_name, data, number, info)
+        self._on_request('station', self._station_sub.topic_name, String, data, info)
+
+    def _on_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
         try:
-            request = request_of('station', deserialize_message(data, String), ())
+            self._take_request(kind, topic, message_type, data, info)
+        except Exception as exc:  # noqa: B902 - the last resort: the node serves on
+            self.get_logger().error(f'a request on {topic} was lost: {exc!r}')
+
+    def _take_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
+        """Record, read and check a request, then queue it: one answer, whatever happens."""
+        received, number = time.monotonic(), next(self._numbers)
+        received_ns = info.get('received_timestamp') or time.time_ns()  # as recorded
+        try:
+            self._recording.request(topic, data, number, info)
+        except Exception as exc:  # noqa: B902 - planning goes on without recording
+            self.get_logger().error(f'request {number} not recorded: {exc!r}')
+        request_id = ''
+        try:
+            try:
+                msg = deserialize_message(data, message_type)
+            except Exception as exc:  # noqa: B902 - bytes that are no such message
+                raise RequestError(ErrorCode.INVALID_REQUEST,
+                                   f'the request is not a {message_type.__name__} '
+                                   f'({reason_of(exc)})') from None
+            cell = self._worker.cell
+            if kind == 'joint':
+                request_id = request_id_of(msg.header.frame_id) if msg.header.frame_id else ''
+                if cell is None:  # the joint names cannot be checked yet: not ready
+                    self._worker.answer_error(number, request_id,
+                                              ErrorCode.ROADMAP_NOT_READY,
+                                              'not ready: the cell is being loaded', None, None)
+                    return
+            request = request_of(kind, msg, cell.robot.joint_names if cell is not None else ())
         except RequestError as exc:
             self._worker.answer_error(number, exc.request_id, exc.code, exc.message, None,
                                       None)
             return
-        self._worker.enqueue(number, request, received)
+        except Exception as exc:  # noqa: B902 - every request gets its one answer
+            self._worker.answer_internal(number, request_id, exc, 'reading the request')
+            return
+        self._worker.enqueue(number, request, received, received_ns)
 
     # ----------------------------------------------------------------- answers out
 
@@ -136,7 +170,10 @@ class WaferPlannerNode(Node):
         """Hand messages to the executor (publishing happens in ``_on_deliver``)."""
         with self._outbox_lock:
             self._outbox.extend(items)
-        self._deliver.trigger()
+        try:
+            self._deliver.trigger()
+        except Exception:  # noqa: B902 - only once the node is being destroyed
+            pass
 
     def _on_deliver(self) -> None:
         while True:
@@ -144,19 +181,30 @@ class WaferPlannerNode(Node):
                 if not self._outbox:
                     return
                 kind, msg, number = self._outbox.popleft()
-            if kind in ('answer', 'result'):
-                # An answer is recorded, and safe from a crash, before it goes out. The
-                # trajectory before its result: a client holding the result can rely on
-                # the trajectory having been sent.
-                out = ((self._trajectory_pub, msg[0]), (self._result_pub, msg[1])) \
-                    if kind == 'answer' else ((self._result_pub, msg),)
-                if self._recording.answer(number, [(p.topic_name, data)
-                                                   for p, data in out]) is False:
-                    self._late_records += 1
-                for publisher, data in out:
-                    publisher.publish(data)
-            else:
-                (self._roadmap_pub if kind == 'markers' else self._path_pub).publish(msg)
+            try:
+                self._deliver_one(kind, msg, number)
+            except Exception as exc:  # noqa: B902 - the next answers still go out
+                self.get_logger().error(f'query {number}: {kind} not published: {exc!r}')
+
+    def _deliver_one(self, kind: str, msg, number: int) -> None:
+        if kind in ('answer', 'result'):
+            # An answer is recorded, and safe from a crash, before it goes out. The
+            # trajectory before its result: a client holding the result can rely on the
+            # trajectory having been sent.
+            out = ((self._trajectory_pub, msg[0]), (self._result_pub, msg[1])) \
+                if kind == 'answer' else ((self._result_pub, msg),)
+            try:
+                recorded = self._recording.answer(number, [(p.topic_name, data)
+                                                           for p, data in out])
+            except Exception as exc:  # noqa: B902 - the answer goes out all the same
+                self.get_logger().error(f'query {number}: answer not recorded: {exc!r}')
+                recorded = False
+            if recorded is False:
+                self._late_records += 1
+            for publisher, data in out:
+                publisher.publish(data)
+        else:
+            (self._roadmap_pub if kind == 'markers' else self._path_pub).publish(msg)
 
     # ----------------------------------------------------------------- services, health
 
@@ -165,21 +213,25 @@ class WaferPlannerNode(Node):
         return {**self._worker.status(), **self._recording.status(),
                 'answers_before_recorded': self._late_records}
 
+    @_service
     def _on_get_status(self, request, response):
         response.success = True
         response.message = json.dumps(self.status())
         return response
 
+    @_service
     def _on_rebuild(self, request, response):
         if not self._worker.rebuild():
             response.success = False
             response.message = 'a roadmap load or rebuild is already under way'
             return response
         response.success = True
-        response.message = ('rebuild started with the current parameters; ~/get_status '
-                            'reports ready when it is done')
+        response.message = ('rebuild started with the current parameters; the current '
+                            'roadmap serves until the new one does (~/get_status: busy_with '
+                            '"load" until done, rebuild_failed if it failed)')
         return response
 
+    @_service
     def _on_set_recording(self, request, response):
         if request.data:
             response.success = self._start_recording()
@@ -235,12 +287,26 @@ class WaferPlannerNode(Node):
         return values
 
     def _publish_health(self) -> None:
+        try:
+            self._diagnostics_pub.publish(self._health())
+        except Exception as exc:  # noqa: B902 - health is reported again in a second
+            self.get_logger().error(f'/diagnostics not published: {exc!r}')
+
+    def _health(self) -> DiagnosticArray:
         status = self.status()
-        level = DiagnosticStatus.OK if status['ready'] else DiagnosticStatus.WARN
-        if not status['ready'] and status['busy_with'] is None:
+        if status['ready']:
+            level, message = DiagnosticStatus.OK, 'ready'
+            if status['rebuild_failed']:
+                level = DiagnosticStatus.WARN
+                message = (f"rebuild failed: {status['last_rebuild_error']}; serving the "
+                           f"previous roadmap {status['hash'][:12]}")
+            elif status['busy_with'] == 'load':
+                message = 'ready; rebuilding the roadmap'
+        elif status['busy_with'] == 'load':
+            level, message = DiagnosticStatus.WARN, 'loading the roadmap'
+        else:
             level = DiagnosticStatus.ERROR
-        message = 'ready' if status['ready'] else (
-            'loading the roadmap' if status['busy_with'] else status['last_error'])
+            message = f"roadmap not loaded: {status['last_rebuild_error']}"
         if status['recording_error']:
             level = max(level, DiagnosticStatus.WARN)
             message += f"; {status['recording_error']}"
@@ -248,14 +314,16 @@ class WaferPlannerNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message += ('; recording stalled: the disk has not synced for 0.25 s, answers go '
                         'out before they are on it')
-        keys = ('ready', 'nodes', 'edges', 'queue', 'served', 'failed', 'recording',
-                'recording_directory', 'recording_error', 'answers_before_recorded')
+        keys = ('ready', 'nodes', 'edges', 'hash', 'queue', 'served', 'failed',
+                'rebuild_failed', 'last_rebuild_error', 'recording', 'recording_directory',
+                'recording_error', 'recording_lost', 'answers_before_recorded')
         health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
                                   message=message, hardware_id='wafer_planner',
-                                  values=[KeyValue(key=k, value=str(status[k])) for k in keys])
+                                  values=[KeyValue(key=k, value=str(status.get(k, '')))
+                                          for k in keys])
         array = DiagnosticArray(status=[health])
         array.header.stamp = self.get_clock().now().to_msg()
-        self._diagnostics_pub.publish(array)
+        return array
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         try:
@@ -269,12 +337,15 @@ class WaferPlannerNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         if hasattr(self, '_recording'):  # not while the parameters are being declared
             self.settings = settings  # read as a whole by the worker: no lock needed
-            self._recording.parameters(self._parameter_values(changed))
-            if 'recording.enabled' in changed and not self._switching_recording:
-                if settings.recording_enabled:
-                    self._start_recording()
-                else:
-                    self._log_closed(*self._stop_recording())
+            try:
+                self._recording.parameters(self._parameter_values(changed))
+                if 'recording.enabled' in changed and not self._switching_recording:
+                    if settings.recording_enabled:
+                        self._start_recording()
+                    else:
+                        self._log_closed(*self._stop_recording())
+            except Exception as exc:  # noqa: B902 - the parameters are set all the same
+                self.get_logger().error(f'recording the parameters failed: {exc!r}')
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:

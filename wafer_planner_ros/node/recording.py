@@ -7,7 +7,9 @@ roadmap. The MCAP ``sequence`` of a request, of its trajectory and of its result
 query number (1, 2, ... per node run), which pairs them however the answers interleave.
 Each roadmap load adds the cell file and the roadmap's identity, and the parameters are
 attached whenever they change (``recording.contents``), so a recording is self-contained.
-ROS-free: the node passes topic names and bytes.
+A recording that stops by itself (a full disk, its directory deleted) says so in
+``recording_error``, with the number of answers it has not recorded since, also given as
+``recording_lost``. ROS-free: the node passes topic names and bytes.
 """
 
 from dataclasses import dataclass, replace
@@ -85,8 +87,8 @@ class NodeRecording:
         if recorder is None:
             return None, ''
         if recorder.close() is None:
-            self.last_error = recorder.error
-            return recorder.directory, recorder.error
+            self.last_error = _error(recorder.status())
+            return recorder.directory, self.last_error
         return recorder.directory, ''
 
     def request(self, topic: str, data: bytes, number: int, info: Mapping) -> None:
@@ -144,8 +146,9 @@ class NodeRecording:
                     'recording_error': self.last_error}
         state = recorder.status()
         return {'recording': not state['error'], 'recording_directory': state['directory'],
-                'recording_error': state['error'], 'recorded': state['written'],
-                'recording_dropped': state['dropped'], 'recording_stalled': state['stalled']}
+                'recording_error': _error(state), 'recorded': state['written'],
+                'recording_dropped': state['dropped'], 'recording_lost': state['lost'],
+                'recording_stalled': state['stalled']}
 
     def _add_loaded(self, recorder: Recorder, loaded: Loaded) -> None:
         recorder.attach(CELL_ATTACHMENT, loaded.cell_text, loaded.loaded_ns)
@@ -157,3 +160,11 @@ class NodeRecording:
     def _failed(self, message: str) -> None:
         self.last_error = message
         self._on_error(message)
+
+
+def _error(state: Mapping) -> str:
+    """Return a failed recording's error with the answers lost since ('' when none)."""
+    if not state['error']:
+        return ''
+    lost = state['lost']
+    return f"{state['error']}; {lost} answer{'' if lost == 1 else 's'} not recorded"

@@ -3,14 +3,17 @@ Plan requests as the node receives them, read into plain values (ROS-free).
 
 A joint request is a JointTrajectory (``header.frame_id`` = id, two points, positions in
 ``joint_names`` order or the robot's when the names are empty); a station request is a JSON
-object ``{"id": "r17", "from": "loadport2", "to": "loadlock1"}`` whose ends may also be
-three joint angles. Anything else raises ``RequestError`` with the SPEC code and a sentence
-naming what is wrong; the planner then checks the values themselves (finite, limits,
-collision, known station).
+object ``{"id": "r17", "from": "loadport2", "to": "loadlock1"}`` (no other keys) whose ends
+may also be three joint angles. Anything else raises ``RequestError`` with the SPEC code and
+a sentence naming what is wrong, never longer than a few hundred characters whatever the
+request holds: every number is checked to be one a float holds (``NOT_FINITE`` otherwise,
+naming the field), and the JSON reader itself can only fail with ``INVALID_REQUEST``. The
+planner then checks the values themselves (limits, collision, known station).
 """
 
 from dataclasses import dataclass
 import json
+import math
 from typing import Optional, Sequence, Union
 
 import numpy as np
@@ -19,6 +22,14 @@ from wafer_planner_ros.errors import ErrorCode
 
 MAX_TEXT = 65536
 """Longest station request (characters) read."""
+MAX_ID = 256
+"""Longest request id (characters)."""
+MAX_NAME = 256
+"""Longest station name (characters) read."""
+QUOTE = 200
+"""Most characters of a request's value that an error message quotes."""
+KEYS = ('id', 'from', 'to')
+"""The keys of a station request."""
 
 End = Union[str, np.ndarray]
 
@@ -55,12 +66,23 @@ def request_of(kind: str, message, robot_joints: Sequence[str]) -> Request:
     Return the request of a received message.
 
     ``kind`` is 'station' (``std_msgs/String``) or 'joint' (``trajectory_msgs/
-    JointTrajectory``); ``message`` is any object with those fields.
+    JointTrajectory``); ``message`` is any object with those fields. ``robot_joints`` is
+    the robot's joint names, empty when the cell is not known yet (a station request's joint
+    angles are then counted by the planner).
     """
     if kind == 'station':
-        return station_request(message.data)
+        return station_request(message.data, robot_joints)
     return joint_request(message.header.frame_id, message.joint_names,
                          [point.positions for point in message.points], robot_joints)
+
+
+def request_id_of(value) -> str:
+    """Return a request id as the answer can carry it; raise RequestError when it cannot."""
+    if not isinstance(value, str) or not value:
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'the request needs a non-empty string "id", got {quote(value)}')
+    _check_text(value, 'the request id', MAX_ID, '')
+    return value
 
 
 def joint_request(request_id: str, joint_names: Sequence[str],
@@ -70,14 +92,16 @@ def joint_request(request_id: str, joint_names: Sequence[str],
     if not request_id:
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            'the request has no id (header.frame_id is empty)')
+    request_id = request_id_of(request_id)
     names = list(joint_names)
     if names:
         unknown = [n for n in names if n not in robot_joints]
         if unknown or sorted(names) != sorted(robot_joints):
             raise RequestError(ErrorCode.JOINT_MISMATCH,
-                               f"joint_names {names} are not a permutation of the robot's "
-                               f'{list(robot_joints)}'
-                               + (f' (unknown: {unknown})' if unknown else ''), request_id)
+                               f'joint_names {quote(names)} are not a permutation of the '
+                               f"robot's {quote(list(robot_joints))}"
+                               + (f' (unknown: {quote(unknown)})' if unknown else ''),
+                               request_id)
         order = [names.index(n) for n in robot_joints]
     else:
         order = list(range(len(robot_joints)))
@@ -87,49 +111,200 @@ def joint_request(request_id: str, joint_names: Sequence[str],
                            f'{len(positions)}', request_id)
     ends = []
     for label, values in zip(('start', 'goal'), positions):
-        values = np.asarray(values, dtype=float).reshape(-1)
+        try:
+            values = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError, OverflowError):  # only from callers other than DDS
+            raise RequestError(ErrorCode.INVALID_REQUEST,
+                               f'the {label} point positions are not numbers: '
+                               f'{quote(values)}', request_id) from None
         if len(values) != len(order):
             raise RequestError(ErrorCode.JOINT_MISMATCH,
                                f'the {label} point has {len(values)} positions; the robot has '
-                               f'{len(robot_joints)} joints ({", ".join(robot_joints)})',
-                               request_id)
-        ends.append(values[order])
+                               f'{_joints(robot_joints)}', request_id)
+        values = values[order]
+        for joint in np.flatnonzero(~np.isfinite(values))[:1]:
+            raise RequestError(ErrorCode.NOT_FINITE,
+                               f'the {label} point is not finite: {robot_joints[joint]} = '
+                               f'{values[joint]}', request_id)
+        ends.append(values)
     return Request(request_id, ends[0], ends[1])
 
 
-def station_request(text: str) -> Request:
-    """Return the request of a station request's JSON text."""
+def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
+    """Return the request of a station request's JSON text (see ``request_of``)."""
     if len(text) > MAX_TEXT:
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request is {len(text)} characters long; at most {MAX_TEXT}')
     try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as exc:
+        # Numbers no float holds become markers (NOT_FINITE below, naming the field) rather
+        # than raising (an integer of over 4300 digits) or overflowing later.
+        data = json.loads(text, parse_int=_integer, parse_float=_float,
+                          parse_constant=_NotFinite, object_pairs_hook=_Object)
+    except (ValueError, RecursionError, MemoryError) as exc:
         raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'the request is not JSON ({str(exc)[:200]})') from None
+                           f'the request is not JSON ({str(exc)[:QUOTE]})') from None
     if not isinstance(data, dict):
         raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'the request must be a JSON object, got {type(data).__name__}')
-    request_id = data.get('id')
-    if not isinstance(request_id, str) or not request_id:
+                           f'the request must be a JSON object, got {quote(data)}')
+    request_id = request_id_of(data.get('id'))
+    if data.repeated:
         raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'the request needs a non-empty string "id", got {request_id!r}'[:300])
+                           f'the request has {quote(data.repeated)} more than once', request_id)
+    unknown = [key for key in data if key not in KEYS]
+    if unknown:
+        # Refused, not ignored: a key the planner does not read would look obeyed.
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'the request has unknown keys {quote(unknown)}; a station request '
+                           'has only "id", "from" and "to"', request_id)
     ends = []
     for key in ('from', 'to'):
         if key not in data:
             raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
                                request_id)
-        ends.append(_end(data[key], key, request_id))
+        ends.append(_end(data[key], key, request_id, robot_joints))
     return Request(request_id, ends[0], ends[1])
 
 
-def _end(value, key: str, request_id: str) -> End:
+def quote(value, limit: int = QUOTE) -> str:
+    """Return ``value`` as JSON text of at most about ``limit`` characters; never raise."""
+    parts = []
+    room = [limit]
+
+    def put(text: str) -> None:
+        parts.append(text)
+        room[0] -= len(text)
+        if room[0] < 0:
+            raise _Full
+
+    def walk(item, depth: int) -> None:
+        if depth > 8:  # deep nesting: bounded work, and no RecursionError
+            put('...')
+        elif isinstance(item, _NotFinite):
+            put(item.quoted)
+        elif isinstance(item, str):
+            put(json.dumps(item[:limit]))  # ASCII escapes: lone surrogates too
+        elif isinstance(item, bool) or item is None:
+            put(json.dumps(item))
+        elif isinstance(item, int):
+            put(str(item) if item.bit_length() < 1024 else f'({_digits(item)} digits)')
+        elif isinstance(item, float):
+            put(json.dumps(item))
+        elif isinstance(item, dict):
+            put('{')
+            for index, (key, element) in enumerate(item.items()):
+                put(', ' if index else '')
+                walk(key, depth + 1)
+                put(': ')
+                walk(element, depth + 1)
+            put('}')
+        elif isinstance(item, (list, tuple)):
+            put('[')
+            for index, element in enumerate(item):
+                put(', ' if index else '')
+                walk(element, depth + 1)
+            put(']')
+        else:
+            put(f'<{type(item).__name__}>')
+
+    try:
+        walk(value, 0)
+    except _Full:
+        return ''.join(parts)[:limit] + '...'
+    except Exception:  # noqa: B902 - a quote in an error message must not fail itself
+        return f'<{type(value).__name__}>'
+    return ''.join(parts)
+
+
+# ----------------------------------------------------------------- reading the JSON
+
+
+class _Full(Exception):
+    """A quote has reached its length."""
+
+
+class _NotFinite:
+    """A JSON number that no finite float holds: as written, or its length (``quoted``)."""
+
+    __slots__ = ('text', 'quoted')
+
+    def __init__(self, text: str, literal: bool = True):
+        self.text = text
+        self.quoted = text if literal else f'({text})'
+
+
+class _Object(dict):
+    """A JSON object; ``repeated`` lists the keys it has more than once."""
+
+    def __init__(self, pairs):
+        super().__init__(pairs)
+        self.repeated = []
+        if len(self) != len(pairs):
+            seen = set()
+            self.repeated = [k for k, _ in pairs if k in seen or seen.add(k)]
+
+
+def _integer(text: str):
+    digits = len(text) - text.startswith('-')
+    if digits > 309:  # at least 10**309: beyond the largest float, and int() may refuse it
+        return _NotFinite(f'{digits} digits', literal=False)
+    value = int(text)
+    try:
+        float(value)
+    except OverflowError:
+        return _NotFinite(f'{digits} digits', literal=False)
+    return value
+
+
+def _float(text: str):
+    value = float(text)
+    if math.isfinite(value):
+        return value
+    if len(text) <= 40:
+        return _NotFinite(text)
+    return _NotFinite(f'{len(text)} characters', literal=False)
+
+
+def _end(value, key: str, request_id: str, robot_joints: Sequence[str]) -> End:
     """Return a station name or joint angles from a JSON value."""
     if isinstance(value, str):
+        _check_text(value, f'"{key}"', MAX_NAME, request_id)
         return value
-    if isinstance(value, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                       for v in value):
-        return np.asarray(value, dtype=float)
+    if isinstance(value, list) and all(
+            isinstance(v, (int, float, _NotFinite)) and not isinstance(v, bool) for v in value):
+        if robot_joints and len(value) != len(robot_joints):
+            raise RequestError(ErrorCode.JOINT_MISMATCH,
+                               f'"{key}" has {len(value)} joint angles; the robot has '
+                               f'{_joints(robot_joints)}', request_id)
+        for index, v in enumerate(value):
+            if isinstance(v, _NotFinite):
+                raise RequestError(ErrorCode.NOT_FINITE,
+                                   f'"{key}"[{index}] is not a finite number ({v.text})',
+                                   request_id)
+        return np.array([float(v) for v in value], dtype=float)
     raise RequestError(ErrorCode.INVALID_REQUEST,
                        f'"{key}" must be a station name or a list of joint angles, got '
-                       f'{json.dumps(value)[:200]}', request_id)
+                       f'{quote(value)}', request_id)
+
+
+def _check_text(text: str, what: str, longest: int, request_id: str) -> None:
+    """Refuse a string that an answer (UTF-8, NUL-terminated) could not carry as it is."""
+    if len(text) > longest:
+        problem = f'is {len(text)} characters long; at most {longest}'
+    elif '\0' in text:
+        problem = 'holds a NUL character'
+    else:
+        try:
+            text.encode('utf-8')
+            return
+        except UnicodeEncodeError:
+            problem = 'is not valid Unicode (a lone surrogate)'
+    raise RequestError(ErrorCode.INVALID_REQUEST, f'{what} {quote(text, 60)} {problem}',
+                       request_id)
+
+
+def _joints(robot_joints: Sequence[str]) -> str:
+    return f'{len(robot_joints)} joints ({", ".join(robot_joints)})'
+
+
+def _digits(value: int) -> int:
+    return int(abs(value).bit_length() * math.log10(2)) + 1

@@ -1,134 +1,216 @@
 """
-The node's planning worker: one thread, loading the roadmap and planning (SPEC section 5).
+The node's planning worker: a planning thread and a loading thread (SPEC section 5).
 
-It loads or rebuilds the roadmap and plans one request at a time. Requests wait in a
-bounded backlog (``planning.max_queue``; beyond it the answer is ``BUSY``). While the
-roadmap loads or is rebuilt requests are answered ``ROADMAP_NOT_READY``; a request still
-waiting ``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The worker
-never publishes: it hands every message, already serialised, to ``send``, which the node
-publishes from its executor. Every request gets exactly one answer, whatever happens.
+The planning thread plans one request at a time. Requests wait in a bounded backlog
+(``planning.max_queue``; beyond it the answer is ``BUSY``); a request still waiting
+``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The loading thread
+loads the roadmap at start-up (requests meanwhile are answered ``ROADMAP_NOT_READY``) and
+rebuilds it on request: the previous roadmap serves until the new one is ready, and keeps
+serving when the rebuild fails (``rebuild_failed`` in the status says why). Each request is
+planned on the roadmap in force when it was received, the one a recording pairs it with.
+The worker never publishes: it hands every message, already serialised, to ``send``, which
+the node publishes from its executor. Every request gets exactly one answer, whatever
+happens: a failure of the node itself is answered ``INTERNAL`` with the reason.
 """
 
 from collections import deque
+from dataclasses import dataclass
 import gc
 import threading
 import time
-from typing import Callable
+from typing import Callable, Optional
 
 from rclpy.serialization import serialize_message
 
-from wafer_planner_ros.cache import load_or_build
+from wafer_planner_ros.cache import CachedRoadmap, load_or_build
 from wafer_planner_ros.cell import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
 from wafer_planner_ros.node import markers, messages
+from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.node.settings import NodeSettings
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap import RoadmapSettings
 
+PREVIOUS_KEPT_NS = 1_000_000_000
+"""How long the previous roadmap is kept for requests received before a new one serves but
+not yet queued (the executor hands them over within milliseconds)."""
+
+
+@dataclass(frozen=True)
+class Serving:
+    """A loaded roadmap and its planner, and when it took over (``time.time_ns()``)."""
+
+    planner: Planner
+    cached: CachedRoadmap
+    loaded_ns: int
+
 
 class PlanningWorker:
-    """The loading and planning thread, its backlog and its state; see the module."""
+    """The loading and planning threads, the backlog and their state; see the module."""
 
     def __init__(self, settings: Callable[[], NodeSettings], recording: NodeRecording,
                  send: Callable, logger, stamp: Callable):
         """
-        Start the thread, which first loads the roadmap.
+        Start the threads; the loading one first loads the roadmap.
 
         ``settings`` returns the node's current settings; ``send(*items)`` hands
-        (kind, message, query number) items to the executor; ``stamp`` returns a ROS time.
+        (kind, message, query number) items to the executor and never raises; ``stamp``
+        returns a ROS time.
         """
         self._settings, self._recording, self._send = settings, recording, send
-        self._logger, self._stamp = logger, stamp
+        self._logger, self._stamp = SafeLogger(logger), stamp
         self.lock = threading.Condition()
-        """Guards everything below; ``notify`` wakes the thread."""
-        self._backlog = deque([('load', None)])
-        self.planner = None
-        self.cell = None
-        """The cell of the last load (set before its roadmap is ready)."""
-        self.cached = None
-        self.busy_with = None
+        """Guards everything below; ``notify_all`` wakes the threads."""
+        self._backlog = deque()
+        """(number, request, received monotonic, received ns) of the waiting requests."""
+        self._serving: Optional[Serving] = None
+        self._previous: Optional[Serving] = None
+        """The roadmap before the serving one, for requests received before it took over."""
+        self._pending_ns: Optional[int] = None
+        """When a loaded roadmap takes over, between being recorded and serving."""
+        self._loading_cell = None
+        self._loading = True
+        self._planning = False
         self.load_failed = False
+        """The last load or rebuild failed (``last_load_error`` says why)."""
+        self.last_load_error = ''
         self.counts = {'served': 0, 'failed': 0}
         self.last_error = ''
         self._stopping = False
         self._thread = threading.Thread(target=self._work, name='wafer_planner_worker',
                                         daemon=True)
+        self._loader = threading.Thread(target=self._load, name='wafer_planner_loader',
+                                        daemon=True)
         self._thread.start()
+        self._loader.start()
+
+    @property
+    def cell(self) -> Optional[Cell]:
+        """Return the serving roadmap's cell, or before the first load the one it loads."""
+        serving = self._serving
+        return serving.planner.cell if serving is not None else self._loading_cell
 
     # ----------------------------------------------------------------- from the executor
 
-    def enqueue(self, number: int, request, received: float) -> None:
-        """Queue request ``number`` (received at ``received``, monotonic) or refuse it."""
-        settings = self._settings()
-        with self.lock:
-            if self.planner is None:
-                reason = self.last_error if self.load_failed else \
-                    'the roadmap is being loaded or built'
-                code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {reason}'
-            elif sum(1 for kind, _ in self._backlog if kind == 'plan') >= settings.max_queue:
-                code = ErrorCode.BUSY
-                message = (f'busy: {settings.max_queue} requests are already waiting '
-                           '(planning.max_queue)')
-            else:
-                self._backlog.append(('plan', (number, request, received)))
-                self.lock.notify()
-                return
+    def enqueue(self, number: int, request, received: float,
+                received_ns: Optional[int] = None) -> None:
+        """
+        Queue request ``number`` or refuse it; never raise.
+
+        ``received``: its receipt (``time.monotonic()``); ``received_ns``: the same as
+        recorded (``time.time_ns()``), which picks the roadmap it is planned on.
+        """
+        try:
+            settings = self._settings()
+            with self.lock:
+                if self._serving is None:
+                    reason = f'roadmap not loaded: {self.last_load_error}' \
+                        if self.load_failed and not self._loading else \
+                        'the roadmap is being loaded or built'
+                    code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {reason}'
+                elif len(self._backlog) >= settings.max_queue:
+                    code = ErrorCode.BUSY
+                    message = (f'busy: {settings.max_queue} requests are already waiting '
+                               '(planning.max_queue)')
+                else:
+                    self._backlog.append((number, request, received,
+                                          time.time_ns() if received_ns is None
+                                          else received_ns))
+                    self.lock.notify_all()
+                    return
+        except Exception as exc:  # noqa: B902 - every request gets its one answer
+            self.answer_internal(number, request.request_id, exc, 'queueing the request',
+                                 request.start, request.goal)
+            return
         self.answer_error(number, request.request_id, code, message, request.start,
                           request.goal)
 
     def rebuild(self) -> bool:
-        """Queue a reload of the cell and roadmap; False when one is already under way."""
+        """Start reloading the cell and roadmap; False when a load is already under way."""
         with self.lock:
-            if any(kind == 'load' for kind, _ in self._backlog) or self.busy_with == 'load':
+            if self._loading:
                 return False
-            self.planner = None
-            self._backlog.append(('load', None))
-            self.lock.notify()
-            return True
+            self._loading = True
+        try:
+            self._loader = threading.Thread(target=self._load, name='wafer_planner_loader',
+                                            daemon=True)
+            self._loader.start()
+        except Exception:
+            with self.lock:
+                self._loading = False
+            raise
+        return True
 
     def answer_error(self, number, request_id, code, message, start, goal,
                      planning_ms=None, roadmap=None) -> None:
-        """Send the error answer of query ``number``."""
-        if roadmap is None and self.cached is not None:
-            roadmap = self.cached.roadmap
+        """Send the error answer of query ``number``; never raise."""
+        try:
+            if roadmap is None and self._serving is not None:
+                roadmap = self._serving.cached.roadmap
+            status = messages.result_status(
+                request_id, 'error', f'{code.value}: {message}',
+                messages.error_values(code.value, roadmap, start, goal, planning_ms))
+        except Exception as exc:  # noqa: B902 - still one answer: without the values
+            code, message = ErrorCode.INTERNAL, \
+                f'internal error: answering {code.value} failed: {reason_of(exc)}'
+            try:
+                status = messages.result_status(str(request_id), 'error',
+                                                f'{code.value}: {message}',
+                                                {'code': code.value})
+            except Exception as again:  # noqa: B902 - nothing left to answer with
+                self._logger.error(f'query {number}: no answer could be made: {again!r}')
+                return
         self._logger.warning(f'request {request_id or "(no id)"}: {code.value}: {message}')
-        status = messages.result_status(
-            request_id, 'error', f'{code.value}: {message}',
-            messages.error_values(code.value, roadmap, start, goal, planning_ms))
         with self.lock:
             self.counts['failed'] += 1
             self.last_error = f'{request_id}: {code.value}: {message}'
         self._send(('result', status, number))
 
+    def answer_internal(self, number, request_id, exc: BaseException, doing: str,
+                        start=None, goal=None, planning_ms=None, roadmap=None) -> None:
+        """Send the ``INTERNAL`` answer of query ``number``, failed while ``doing``."""
+        self._logger.error(f'request {request_id or "(no id)"}: internal error while '
+                           f'{doing}: {exc!r}'[:2000])
+        self.answer_error(number, request_id, ErrorCode.INTERNAL,
+                          f'internal error while {doing}: {reason_of(exc)}', start, goal,
+                          planning_ms, roadmap)
+
     def status(self) -> dict:
         """Return the worker's part of ``~/get_status``."""
+        settings = self._settings()
         with self.lock:
-            roadmap = self.cached.roadmap if self.cached is not None else None
+            serving = self._serving
+            roadmap = serving.cached.roadmap if serving is not None else None
+            cell = serving.planner.cell if serving is not None else self._loading_cell
             return {
-                'ready': self.planner is not None,
-                'busy_with': self.busy_with,
-                'cell': self.cell.name if self.cell is not None else None,
+                'ready': serving is not None,
+                'busy_with': 'load' if self._loading else 'plan' if self._planning else None,
+                'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
                 'edges': roadmap.edge_count if roadmap is not None else 0,
                 'hash': roadmap.digest if roadmap is not None else '',
-                'seed': roadmap.seed if roadmap is not None else self._settings().seed,
-                'queue': sum(1 for kind, _ in self._backlog if kind == 'plan'),
+                'seed': roadmap.seed if roadmap is not None else settings.seed,
+                'queue': len(self._backlog),
                 'served': self.counts['served'], 'failed': self.counts['failed'],
                 'last_error': self.last_error,
+                'rebuild_failed': self.load_failed,
+                'last_rebuild_error': self.last_load_error,
             }
 
     def request_stop(self) -> None:
-        """Have the thread stop after the request it is planning (see ``join``)."""
+        """Have the planning thread stop after the request it is planning (see ``join``)."""
         with self.lock:
             self._stopping = True
             self.lock.notify_all()
 
     def join(self, timeout: float) -> None:
-        """Wait up to ``timeout`` seconds for the thread to stop."""
-        self._thread.join(timeout)
+        """Wait up to ``timeout`` seconds in all for the threads to stop."""
+        deadline = time.monotonic() + timeout
+        for thread in (self._thread, self._loader):
+            thread.join(max(0.0, deadline - time.monotonic()))
 
-    # ----------------------------------------------------------------- the thread
+    # ----------------------------------------------------------------- planning
 
     def _work(self) -> None:
         while True:
@@ -137,27 +219,112 @@ class PlanningWorker:
                     self.lock.wait()
                 if self._stopping:
                     return
-                kind, item = self._backlog.popleft()
-                self.busy_with = kind
+                item = self._backlog.popleft()
+                self._planning = True
             try:
-                if kind == 'plan':
-                    self._plan(*item)
-                else:
-                    self._load()
+                self._plan(*item)
+            except Exception as exc:  # noqa: B902 - the thread outlives any one request
+                self._logger.error(f'planning thread: {exc!r}')
             finally:
                 with self.lock:
-                    self.busy_with = None
+                    self._planning = False
+
+    def _serving_for(self, received_ns: int) -> Optional[Serving]:
+        """Return the roadmap in force at ``received_ns``; call with the lock held."""
+        while self._pending_ns is not None and received_ns >= self._pending_ns:
+            self.lock.wait()  # recorded as taking over, not serving yet: a moment
+        serving, previous = self._serving, self._previous
+        if serving is not None and received_ns < serving.loaded_ns and previous is not None:
+            return previous
+        if previous is not None and serving is not None \
+                and time.time_ns() - serving.loaded_ns > PREVIOUS_KEPT_NS \
+                and all(item[3] >= serving.loaded_ns for item in self._backlog):
+            self._previous = None  # no request needs it any more: free its memory
+        return serving
+
+    def _plan(self, number: int, request, received: float, received_ns: int) -> None:
+        """Answer one request, exactly once."""
+        roadmap, begun, doing = None, None, 'planning'
+        try:
+            settings = self._settings()
+            with self.lock:
+                serving = self._serving_for(received_ns)
+            if serving is None:
+                self.answer_error(number, request.request_id, ErrorCode.ROADMAP_NOT_READY,
+                                  'not ready: the roadmap is being loaded', request.start,
+                                  request.goal)
+                return
+            planner, roadmap = serving.planner, serving.cached.roadmap
+            if planner.settings.sample_period != settings.sample_period:
+                planner = Planner(planner.cell, planner.roadmap,
+                                  PlannerSettings(sample_period=settings.sample_period))
+            begun = time.monotonic()
+            try:
+                result = planner.plan(request.start, request.goal,
+                                      deadline=received + settings.timeout)
+            except PlanningError as exc:
+                self.answer_error(number, request.request_id, exc.code, exc.message,
+                                  request.start, request.goal,
+                                  (time.monotonic() - begun) * 1000.0, roadmap)
+                return
+            doing = 'answering'
+            stamp = self._stamp()
+            level = 'warn' if result.warnings else 'ok'
+            message = '; '.join(result.warnings) or (
+                f'ok: {result.start.label} -> {result.goal.label} in '
+                f'{result.cycle_time:.3f} s')
+            # The trajectory and its result go together (the node records both, then
+            # publishes them); the markers, for people, after both.
+            answer = (
+                messages.trajectory(result, request.request_id,
+                                    planner.cell.robot.joint_names, stamp),
+                messages.result_status(
+                    request.request_id, level, message,
+                    dict(messages.plan_values(result, roadmap, request.start, request.goal),
+                         node_ms=(time.monotonic() - received) * 1000.0)))
+        except Exception as exc:  # noqa: B902 - every request gets its one answer
+            self.answer_internal(number, request.request_id, exc, doing, request.start,
+                                 request.goal,
+                                 None if begun is None else (time.monotonic() - begun) * 1e3,
+                                 roadmap)
+            return
+        self._send(('answer', answer, number))
+        with self.lock:
+            self.counts['served'] += 1
+        try:
+            path = markers.path_markers(planner.cell, result, settings.frame_id, stamp)
+        except Exception as exc:  # noqa: B902 - answered already: only the picture is lost
+            self._logger.error(f'request {request.request_id}: no path markers: {exc!r}')
+            return
+        self._send(('path', path, number))
+
+    # ----------------------------------------------------------------- loading
 
     def _load(self) -> None:
         """Load or build the roadmap for the current parameters; never raise."""
-        with self.lock:
-            self.planner = None
+        try:
+            self._load_roadmap()
+        except Exception as exc:  # noqa: B902 - the node stays up and says why
+            self._load_failed(exc)
+        finally:
+            with self.lock:
+                self._loading = False
+
+    def _load_roadmap(self) -> None:
         settings = self._settings()
         started = time.monotonic()
         try:
             cell_text = settings.cell_file.read_bytes()  # the very text that is recorded
             cell = Cell.from_text(cell_text, str(settings.cell_file))
-            self.cell = cell
+        except Exception as exc:  # noqa: B902 - the node stays up and says why
+            self._load_failed(exc, settings.cell_file)
+            return
+        for note in cell.notes:
+            self._logger.warning(f'{settings.cell_file}: {note}')
+        try:
+            with self.lock:
+                if self._serving is None:  # joint requests are read with it meanwhile
+                    self._loading_cell = cell
             self._logger.info(f'cell {cell.name} from {settings.cell_file}; loading or '
                               f'building a roadmap of {settings.nodes} nodes')
             cached = load_or_build(cell, RoadmapSettings(nodes=settings.nodes), settings.seed,
@@ -166,12 +333,7 @@ class PlanningWorker:
                               PlannerSettings(sample_period=settings.sample_period))
             warm_up(planner)
         except Exception as exc:  # noqa: B902 - the node stays up and says why
-            kind = '' if isinstance(exc, (WaferPlannerError, ValueError, OSError)) else \
-                'internal error: '
-            self.last_error = f'roadmap not loaded: {kind}{exc}'
-            self._logger.error(self.last_error)
-            with self.lock:
-                self.cached, self.load_failed = None, True
+            self._load_failed(exc)
             return
         roadmap = cached.roadmap
         # Everything loaded so far lives as long as the node: keep it out of the garbage
@@ -179,21 +341,52 @@ class PlanningWorker:
         gc.collect()
         gc.freeze()
         # Recorded before it serves: every recorded query comes after the load it used.
-        self._recording.loaded(Loaded(cell_text, {
-            'cell': cell.name, 'cell_file': str(settings.cell_file),
-            'cell_digest': cell.digest, 'roadmap_hash': roadmap.digest,
-            'roadmap_nodes': str(settings.nodes), 'roadmap_seed': str(roadmap.seed),
-            'roadmap_edges': str(roadmap.edge_count)}, time.time_ns()))
+        # Requests received from this instant on wait (a moment) for it to serve.
+        loaded_ns = time.time_ns()
         with self.lock:
-            self.cached, self.planner, self.load_failed = cached, planner, False
-        roadmap_markers = serialize_message(markers.roadmap_markers(
-            cell, roadmap, settings.frame_id, self._stamp()))
-        self._send(('markers', roadmap_markers, 0))
-        self._recording.markers(roadmap_markers)
+            self._pending_ns = loaded_ns
+        try:
+            self._recording.loaded(Loaded(cell_text, {
+                'cell': cell.name, 'cell_file': str(settings.cell_file),
+                'cell_digest': cell.digest, 'roadmap_hash': roadmap.digest,
+                'roadmap_nodes': str(settings.nodes), 'roadmap_seed': str(roadmap.seed),
+                'roadmap_edges': str(roadmap.edge_count)}, loaded_ns))
+        except Exception as exc:  # noqa: B902 - a recording's failure is not the roadmap's
+            self._logger.error(f'the roadmap load was not recorded: {exc!r}')
+        finally:
+            with self.lock:
+                self._pending_ns = None  # first: planning waits while it is set
+                self._previous = self._serving
+                self._serving = Serving(planner, cached, loaded_ns)
+                self._loading_cell = None
+                self.load_failed, self.last_load_error = False, ''
+                self.lock.notify_all()
+        try:
+            roadmap_markers = serialize_message(markers.roadmap_markers(
+                cell, roadmap, settings.frame_id, self._stamp()))
+            self._send(('markers', roadmap_markers, 0))
+            self._recording.markers(roadmap_markers)
+        except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
+            self._logger.error(f'roadmap markers not published: {exc!r}')
         self._logger.info(
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
             f'(ready {time.monotonic() - started:.2f} s after loading began)')
+
+    def _load_failed(self, exc: Exception, cell_file=None) -> None:
+        """Say why the load failed; the serving roadmap, if any, serves on."""
+        kind = '' if isinstance(exc, (WaferPlannerError, ValueError, OSError)) else \
+            'internal error: '
+        reason = f'{kind}{reason_of(exc, with_type=bool(kind))}'
+        if cell_file is not None and str(cell_file) not in reason:
+            reason = f'cell file {cell_file}: {reason}'  # say which file it is
+        with self.lock:
+            serving = self._serving
+            self.load_failed, self.last_load_error = True, reason
+            self.last_error = f'roadmap not loaded: {reason}' if serving is None else (
+                f'rebuild failed: {reason}; serving the previous roadmap '
+                f'{serving.cached.roadmap.digest[:12]}')
+        self._logger.error(self.last_error)
 
     def _progress(self):
         logger, last = self._logger, [-1]
@@ -204,51 +397,6 @@ class PlanningWorker:
                 last[0] = tenth
                 logger.info(f'building roadmap: {done}/{total} nodes, {edges} edges')
         return report
-
-    def _plan(self, number: int, request, received: float) -> None:
-        settings = self._settings()
-        with self.lock:
-            planner, cached = self.planner, self.cached
-        roadmap = cached.roadmap if cached is not None else None
-        if planner is None:
-            self.answer_error(number, request.request_id, ErrorCode.ROADMAP_NOT_READY,
-                              'not ready: the roadmap is being rebuilt', request.start,
-                              request.goal)
-            return
-        if planner.settings.sample_period != settings.sample_period:
-            planner = Planner(planner.cell, planner.roadmap,
-                              PlannerSettings(sample_period=settings.sample_period))
-        begun = time.monotonic()
-        try:
-            result = planner.plan(request.start, request.goal,
-                                  deadline=received + settings.timeout)
-        except PlanningError as exc:
-            self.answer_error(number, request.request_id, exc.code, exc.message, request.start,
-                              request.goal, (time.monotonic() - begun) * 1000.0, roadmap)
-            return
-        except Exception as exc:  # noqa: B902 - every request gets its one answer
-            self._logger.error(f'request {request.request_id}: internal error {exc!r}')
-            self.answer_error(number, request.request_id, ErrorCode.INTERNAL,
-                              f'internal error: {exc!r}', request.start, request.goal,
-                              (time.monotonic() - begun) * 1000.0, roadmap)
-            return
-        stamp = self._stamp()
-        level = 'warn' if result.warnings else 'ok'
-        message = '; '.join(result.warnings) or (
-            f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
-        # The trajectory and its result go together (the node records both, then publishes
-        # them); the markers, for people, after both.
-        self._send(('answer', (
-            messages.trajectory(result, request.request_id, planner.cell.robot.joint_names,
-                                stamp),
-            messages.result_status(
-                request.request_id, level, message,
-                dict(messages.plan_values(result, roadmap, request.start, request.goal),
-                     node_ms=(time.monotonic() - received) * 1000.0))), number))
-        self._send(('path', markers.path_markers(planner.cell, result, settings.frame_id,
-                                                 stamp), number))
-        with self.lock:
-            self.counts['served'] += 1
 
 
 def warm_up(planner) -> None:

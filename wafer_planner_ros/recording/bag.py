@@ -21,6 +21,10 @@ import yaml  # after the package: ament_flake8 takes wafer_planner_ros for a thi
 
 METADATA_FILE = 'metadata.yaml'
 ROS_DISTRO = 'jazzy'
+MOUNTS = Path('/proc/self/mountinfo')
+NETWORK_FILESYSTEMS = frozenset({'nfs', 'nfs4', 'cifs', 'smb3', 'smbfs', 'ceph', 'glusterfs',
+                                 'lustre', 'afs', '9p', 'fuse'})
+"""Where ``BagWriter.deleted`` does not look (``fuse.*`` counts as ``fuse``)."""
 _INFINITE = {'sec': 9223372036, 'nsec': 854775807}  # rmw's "infinite" duration
 
 
@@ -73,18 +77,13 @@ def metadata_yaml(file_name: str, topics: Iterable[Topic], counts: Mapping[str, 
     total = sum(counts.values())
     if total == 0:
         start_ns = end_ns = 0
-    nanoseconds = max(end_ns - start_ns, 0)
-
-    def duration():  # a new mapping each time: no YAML anchors and aliases in the file
-        return {'nanoseconds': nanoseconds}
-
-    def starting():
-        return {'nanoseconds_since_epoch': start_ns}
+    duration = {'nanoseconds': max(end_ns - start_ns, 0)}
+    starting = {'nanoseconds_since_epoch': start_ns}
     return _yaml({'rosbag2_bagfile_information': {
         'version': 9,
         'storage_identifier': 'mcap',
-        'duration': duration(),
-        'starting_time': starting(),
+        'duration': duration,
+        'starting_time': starting,
         'message_count': total,
         'topics_with_message_count': [
             {'topic_metadata': {'name': t.name, 'type': t.type, 'serialization_format': 'cdr',
@@ -94,7 +93,7 @@ def metadata_yaml(file_name: str, topics: Iterable[Topic], counts: Mapping[str, 
         'compression_format': '',
         'compression_mode': '',
         'relative_file_paths': [file_name],
-        'files': [{'path': file_name, 'starting_time': starting(), 'duration': duration(),
+        'files': [{'path': file_name, 'starting_time': starting, 'duration': duration,
                    'message_count': total}],
         'custom_data': {'writer': f'wafer_planner_ros {__version__}'},
         'ros_distro': ROS_DISTRO,
@@ -133,6 +132,11 @@ class BagWriter:
         self.start_ns: Optional[int] = None
         self.end_ns = 0
         self._stream = opener(self.path, 'wb')
+        try:
+            self._stream.fileno()
+            self._watched = not network_filesystem(self.directory)
+        except (OSError, ValueError, AttributeError):  # no descriptor: not a file on a disk
+            self._watched = False
         self._writer = Writer(self._stream, compression=CompressionType.NONE)
         self._writer.start(profile='ros2', library=f'wafer_planner_ros {__version__}')
         self._channels = {}
@@ -170,6 +174,21 @@ class BagWriter:
         """Make what was flushed durable on the disk (``fsync``), against power loss."""
         os.fsync(self._stream.fileno())
 
+    def deleted(self) -> bool:
+        """
+        Return True once the open file is deleted, alone or with its directory.
+
+        Linux lets a deleted file be written on, to no avail, until it is closed. One
+        ``fstat``, about a microsecond; not on a network filesystem, where it waits for the
+        server and where a deleted open file lives on under another name anyway.
+        """
+        if self.closed or not self._watched:
+            return False
+        try:
+            return os.fstat(self._stream.fileno()).st_nlink == 0
+        except (OSError, ValueError):  # closed meanwhile: a write will tell what went wrong
+            return False
+
     def metadata_text(self) -> str:
         """Return ``metadata.yaml`` as it would be written now."""
         return metadata_yaml(self.path.name, self.topics, self.counts,
@@ -199,5 +218,33 @@ class BagWriter:
             pass
 
 
+def network_filesystem(directory: Path, mounts: Path = MOUNTS) -> bool:
+    """Return True when ``directory`` is on a network (or FUSE) filesystem, as far as known."""
+    try:
+        device = os.stat(directory).st_dev
+        lines = Path(mounts).read_text().splitlines()
+    except OSError:
+        return False
+    wanted = f'{os.major(device)}:{os.minor(device)}'
+    for line in lines:
+        # mount id, parent id, major:minor, root, mount point, options, [optional], -, type
+        fields = line.split()
+        if len(fields) > 7 and fields[2] == wanted and '-' in fields[6:-1]:
+            kind = fields[fields.index('-', 6) + 1]
+            return kind.split('.')[0] in NETWORK_FILESYSTEMS
+    return False
+
+
+class _Dumper(yaml.SafeDumper):
+    """``yaml.SafeDumper`` writing a mapping shared by two places out twice."""
+
+    def ignore_aliases(self, data) -> bool:
+        # Never anchors and aliases (``&id001``, ``*id001``): rosbag2 writes none. Topics
+        # sharing a profile share its nested durations; here, not at every copy, because a
+        # single shallow copy anywhere would bring the aliases back.
+        return True
+
+
 def _yaml(value) -> str:
-    return yaml.safe_dump(value, sort_keys=False, default_flow_style=False, width=1000)
+    return yaml.dump(value, Dumper=_Dumper, sort_keys=False, default_flow_style=False,
+                     width=1000)

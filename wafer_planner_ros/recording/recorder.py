@@ -16,9 +16,14 @@ The thread also ``fsync``-s the file after every flush, against power loss. When
 has hung for ``STALL`` seconds, or the writer lock cannot be had in that time, the disk is
 taken as stalled: ``write_now`` then queues its messages and returns False at once, so
 answers are never held up by a stuck disk (the caller counts them). A write error (a full
-disk, a directory that vanished) stops the recording, is reported through ``on_error``
+disk, an unwritable directory) stops the recording, is reported through ``on_error``
 and ``status()``, and leaves the bag readable up to its last flush (``wafer-recover``
-completes it). Planning goes on regardless.
+completes it). So does a deleted file (its directory removed): Linux takes writes to it
+without complaint, so every write, and ``status()``, checks that it is still there (about
+a microsecond; ``BagWriter.deleted``, which does not look on network filesystems).
+Planning goes on regardless. Messages are counted ``written`` only once the file was found
+still there after them; ``lost`` counts the answers (``write_now`` with ``flush``) that
+did not reach the file because the recording had stopped, or failed while they waited.
 """
 
 from collections import deque
@@ -39,6 +44,10 @@ STALL = 0.25
 
 Message = Tuple[str, bytes, int, int, int]
 """(topic, serialised bytes, log time ns, publish time ns, sequence)."""
+
+
+class _Deleted(OSError):
+    """The bag's file was deleted while it was being written."""
 
 
 def bag_name(node_name: str, when: Optional[float] = None) -> str:
@@ -67,6 +76,9 @@ class Recorder:
         self._closing = False
         self.error = ''
         self.dropped = 0
+        """Messages not written (the recording stopped, or the queue was full)."""
+        self.lost = 0
+        """Answers (``write_now`` with ``flush``) not written, as ``dropped``."""
         self.written = 0
         self._thread = threading.Thread(target=self._run, name='wafer_planner_recorder',
                                         daemon=True)
@@ -83,20 +95,22 @@ class Recorder:
         recording has failed or is closing.
         """
         if self.error or self._closing:
-            self._count_dropped(len(messages))
+            self._count_dropped(len(messages), flush)
             return False
         if not self.stalled() and self._lock.acquire(timeout=STALL):
             try:
                 if self.error:  # failed while this thread waited
-                    self._count_dropped(len(messages))
+                    self._count_dropped(len(messages), flush)
                     return False
                 self._drain()
                 for message in messages:
                     self._writer.write(*message)
-                self._count_written(len(messages))
                 if flush:
                     self._writer.flush()
+                self._check()
+                self._count_written(len(messages))
             except Exception as exc:  # noqa: B902 - any failure stops the recording only
+                self._count_dropped(len(messages), flush)
                 self._fail(exc)
                 return False
             finally:
@@ -107,7 +121,7 @@ class Recorder:
         for message in messages:  # a stalled disk: the thread writes them when it can
             self._put(('message', *message))
         if flush:
-            self._put(('flush',))
+            self._put(('flush', True))
         return False
 
     def stalled(self) -> bool:
@@ -133,7 +147,7 @@ class Recorder:
 
     def flush(self) -> None:
         """Queue a durability point: a flush, then a sync."""
-        self._put(('flush',))
+        self._put(('flush', False))
 
     def close(self, timeout: float = 30.0) -> Optional[Path]:
         """
@@ -152,16 +166,34 @@ class Recorder:
         return None if self.error else self.directory / 'metadata.yaml'
 
     def status(self) -> dict:
-        """Return the recording's state for status and diagnostics."""
+        """Return the recording's state for status and diagnostics (after ``check``)."""
+        self.check()
         with self._wake:
             return {'directory': str(self.directory), 'written': self.written,
-                    'pending': len(self._queue), 'dropped': self.dropped,
+                    'pending': len(self._queue), 'dropped': self.dropped, 'lost': self.lost,
                     'stalled': self.stalled(), 'error': self.error}
+
+    def check(self) -> None:
+        """Stop the recording if its file was deleted; never waits for a write under way."""
+        if self.error or not self._lock.acquire(blocking=False):
+            return  # the write under way checks when it is done
+        try:
+            if not self.error:
+                self._check()
+        except _Deleted as exc:
+            self._fail(exc)
+        finally:
+            self._lock.release()
+
+    def _check(self) -> None:
+        """Raise ``_Deleted`` if the file was deleted (the writer lock held)."""
+        if self._writer.deleted():
+            raise _Deleted(f'{self.directory} was deleted')
 
     def _put(self, item) -> None:
         with self._wake:
             if self.error or self._closing or len(self._queue) >= MAX_PENDING:
-                self.dropped += item[0] == 'message'
+                self._tally_dropped([item])
                 return
             self._queue.append(item)
             self._wake.notify()
@@ -175,9 +207,15 @@ class Recorder:
         with self._wake:
             self.written += count
 
-    def _count_dropped(self, count: int) -> None:
+    def _count_dropped(self, count: int, answer: bool = False) -> None:
         with self._wake:
             self.dropped += count
+            self.lost += answer
+
+    def _tally_dropped(self, items) -> None:
+        """Count the messages and answers among queued ``items`` as dropped (``_wake`` held)."""
+        self.dropped += sum(1 for item in items if item[0] == 'message')
+        self.lost += sum(1 for item in items if item[0] == 'flush' and item[1])
 
     # -------------------------------------------------------------- the thread
 
@@ -209,33 +247,43 @@ class Recorder:
         with self._wake:
             items = list(self._queue)
             self._queue.clear()
-        flushed, done = False, 0
+        if not items:
+            return False
+        flushed, checked = False, 0
         try:
-            for item in items:
+            for done, item in enumerate(items, 1):
                 kind = item[0]
                 if kind == 'message':
                     self._writer.write(*item[1:])
-                    self._count_written(1)
                 elif kind == 'flush':
                     self._writer.flush()
                     flushed = True
+                    checked = self._confirm(items, checked, done)
                 elif kind == 'attach':
                     self._writer.attach(*item[1:])
                 else:
                     self._writer.metadata(*item[1:])
-                done += 1
+            self._confirm(items, checked, len(items))
         except Exception:
-            self._count_dropped(sum(1 for item in items[done:] if item[0] == 'message'))
+            with self._wake:  # what was not in the file at its last check did not reach it
+                self._tally_dropped(items[checked:])
             raise
         return flushed
 
+    def _confirm(self, items, checked: int, done: int) -> int:
+        """Count ``items[checked:done]`` written once the file is still there; return done."""
+        self._check()
+        self._count_written(sum(1 for item in items[checked:done] if item[0] == 'message'))
+        return done
+
     def _fail(self, exc: BaseException) -> None:
-        message = f'recording to {self._writer.path} failed: {exc}'
+        message = f'recording stopped: {exc}' if isinstance(exc, _Deleted) \
+            else f'recording to {self._writer.path} failed: {exc}'
         with self._wake:
             if self.error:
                 return
             self.error = message
-            self.dropped += sum(1 for item in self._queue if item[0] == 'message')
+            self._tally_dropped(self._queue)
             self._queue.clear()
             self._wake.notify()
         self._writer.abandon()
