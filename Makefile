@@ -40,6 +40,7 @@ bench: $(STAMP)
 	$(ENV) $(PY) bench/bench_roadmap.py
 	$(ENV) $(PY) bench/bench_plan.py
 	$(ENV) $(PY) bench/bench_node.py
+	$(ENV) $(PY) bench/bench_cell.py
 
 clean:
 	rm -rf .colcon
