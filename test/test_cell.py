@@ -1,7 +1,9 @@
 """The cell model: the default cell's values and every validation error a user can make."""
 
 import copy
+import warnings
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 from wafer_planner_ros.cell import Cell, default_cell_path
@@ -137,6 +139,12 @@ BAD_VALUES = [
     ('cell.boundary', [[-0.85, -0.45], [1e308, -0.45], [0.85, 0.45], [-0.85, 0.45]],
      'cell.boundary[1][0]', 'farther out'),
     ('robot.base', [0.0, -1e300], 'robot.base[1]', 'farther out'),
+    ('robot.link_lengths', [0.36, 1e300, 0.22], 'robot.link_lengths[1]', 'longer than 1000 m'),
+    ('robot.wafer_radius', 1e300, 'robot.wafer_radius', 'larger than 1000 m'),
+    ('stations.loadport1', {'wafer_center': [1e300, 0.0], 'heading': 0.0},
+     'stations.loadport1.wafer_center[0]', 'farther out'),
+    ('stations.loadport1', {'wafer_center': [0.0, 0.26], 'heading': 1e300},
+     'stations.loadport1.heading', 'not a plausible heading'),
     ('robot.clearance_margin', -0.001, 'robot.clearance_margin', 'must be >= 0'),
     ('robot.clearance_margin', 0.05, 'stations.loadport1',
      'within the clearance margin of 50.0 mm'),
@@ -244,3 +252,43 @@ def test_valid_enclosures_the_old_check_refused_are_accepted(document):
         'cell.boundary: vertex 6 repeats vertex 5 and was dropped')
     assert cross2(cell.obstacles[0][1] - cell.obstacles[0][0],
                   cell.obstacles[0][2] - cell.obstacles[0][1]) > 0  # made counter-clockwise
+
+
+def _key_paths(node, prefix=()):
+    """Yield the key path of every value in a parsed cell document."""
+    if prefix:
+        yield prefix
+    items = node.items() if isinstance(node, dict) else \
+        enumerate(node) if isinstance(node, list) else ()
+    for key, value in items:
+        yield from _key_paths(value, prefix + (key,))
+
+
+_DOCUMENT = yaml.safe_load(default_cell_path().read_text())
+_HOSTILE = st.one_of(
+    st.sampled_from([0, -1, 1e-300, 5e-324, 1e308, -1e308, 10 ** 400, -10 ** 400, True, None,
+                     '', 'x' * 10000, [], {}, [[0, 0], [1, 0], [1, 1]], [1e308] * 3,
+                     [[-1e300, 0], [1e300, 0], [0, 1e300]]]),
+    st.floats(allow_nan=True, allow_infinity=True), st.integers(),
+    st.lists(st.floats(), max_size=4), st.text(max_size=20))
+
+
+@settings(max_examples=600, deadline=None, derandomize=True, database=None)
+@given(st.lists(st.tuples(st.sampled_from(list(_key_paths(_DOCUMENT))), _HOSTILE),
+                min_size=1, max_size=3))
+def test_any_value_anywhere_gives_a_cell_or_a_short_cell_error(changes):
+    doc = copy.deepcopy(_DOCUMENT)
+    for path, value in changes:
+        node = doc
+        try:
+            for key in path[:-1]:
+                node = node[key]
+            node[path[-1]] = value
+        except (KeyError, IndexError, TypeError):
+            continue  # an earlier change replaced a mapping or list on this path
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')  # no overflow on the way to the answer either
+        try:
+            Cell.from_dict(doc)
+        except CellError as exc:
+            assert len(str(exc)) < 4096

@@ -233,13 +233,19 @@ def _clearance_model(robot: Robot, boundary, obstacles) -> ClearanceModel:
                           margin=robot.clearance_margin)
 
 
-def _coordinates(points: np.ndarray, path: str) -> None:
-    """Refuse a point too far out to be part of a cell (its arithmetic would overflow)."""
-    far = np.nonzero(np.abs(points) > MAX_COORDINATE)
-    if len(far[0]):
-        where = ''.join(f'[{int(k[0])}]' for k in far)
-        raise CellError(f'{path}{where}', f'{points[far][0]:.6g} m is farther out than '
+def _coordinates(values, path: str, beyond: str = 'farther out than'):
+    """
+    Return ``values`` (m); refuse one beyond MAX_COORDINATE, too large to be part of a cell.
+
+    Beyond it the geometry's arithmetic would overflow long before it meant anything.
+    """
+    values = np.asarray(values, float)
+    far = np.argwhere(np.abs(values) > MAX_COORDINATE)
+    if len(far):
+        where = ''.join(f'[{int(k)}]' for k in far[0])  # nothing for a single number
+        raise CellError(f'{path}{where}', f'{values[tuple(far[0])]:.6g} m is {beyond} '
                                           f'{MAX_COORDINATE:g} m: not a plausible cell')
+    return values
 
 
 def _polygon(value, path: str, notes: list) -> np.ndarray:
@@ -281,17 +287,21 @@ def _robot(value, boundary, obstacles) -> Robot:
     margin = schema.number(r.get('clearance_margin', 0.0), 'robot.clearance_margin')
     if margin < 0.0:
         raise CellError('robot.clearance_margin', f'must be >= 0, got {margin!r}')
+    sizes = {key: _coordinates(schema.vector(r[key], f'robot.{key}', 3, positive=True),
+                               f'robot.{key}', 'longer than')
+             for key in ('link_lengths', 'link_radii')}
     return Robot(
         base=base, joint_names=names,
-        link_lengths=schema.vector(r['link_lengths'], 'robot.link_lengths', 3, positive=True),
-        link_radii=schema.vector(r['link_radii'], 'robot.link_radii', 3, positive=True),
-        wafer_radius=schema.number(r['wafer_radius'], 'robot.wafer_radius', positive=True),
+        link_lengths=sizes['link_lengths'], link_radii=sizes['link_radii'],
+        wafer_radius=float(_coordinates(schema.number(
+            r['wafer_radius'], 'robot.wafer_radius', positive=True), 'robot.wafer_radius',
+            'larger than')),
         limits=_limits(r['joint_limits']),
         wafer_acceleration_limit=schema.vector(
             r['wafer_acceleration_limit'], 'robot.wafer_acceleration_limit', 2, positive=True),
         wafer_acceleration_norm_limit=None if norm is None else schema.number(
             norm, 'robot.wafer_acceleration_norm_limit', positive=True),
-        clearance_margin=margin)
+        clearance_margin=float(_coordinates(margin, 'robot.clearance_margin', 'larger than')))
 
 
 def _check_motion_times(robot: Robot, boundary: np.ndarray) -> None:
@@ -384,8 +394,13 @@ def _station(name: str, value, robot: Robot, model: ClearanceModel) -> Station:
     else:
         s = schema.mapping(value, path, required=('wafer_center', 'heading'),
                            optional=('elbow',))
-        centre = schema.vector(s['wafer_center'], f'{path}.wafer_center', 2)
+        centre = _coordinates(schema.vector(s['wafer_center'], f'{path}.wafer_center', 2),
+                              f'{path}.wafer_center')
         heading = schema.number(s['heading'], f'{path}.heading')
+        if abs(heading) > MAX_JOINT_ANGLE:
+            raise CellError(f'{path}.heading', f'{heading:.6g} rad is beyond '
+                                               f'+-{MAX_JOINT_ANGLE:g} rad: not a plausible '
+                                               'heading')
         elbow = s.get('elbow')
         if elbow is not None and (isinstance(elbow, bool) or elbow not in (1, -1)):
             raise CellError(f'{path}.elbow', f'must be 1 or -1, got {schema.brief(elbow)}')

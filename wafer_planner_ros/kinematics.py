@@ -88,8 +88,10 @@ class PlanarArm:
         l1, l2, l3 = self.link_lengths
         wrist = np.asarray(wafer_center, float) - l3 * np.array([np.cos(heading), np.sin(heading)])
         dx, dy = wrist - self.base
-        cos_q2 = (dx * dx + dy * dy - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
-        if abs(cos_q2) > 1.0 + 1e-12:
+        with np.errstate(over='ignore', divide='ignore', invalid='ignore'):
+            # A pose far beyond reach (or an absurdly short link) overflows: unreachable.
+            cos_q2 = (dx * dx + dy * dy - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
+        if not abs(cos_q2) <= 1.0 + 1e-12:
             return []
         solutions = []
         for elbow in (1, -1):
