@@ -1,6 +1,7 @@
 """Reading a cell file: bounded cost and messages, duplicate keys, numbers as users write them."""
 
 import copy
+import os
 import time
 
 import pytest
@@ -254,3 +255,17 @@ def test_encodings_and_empty_files():
     for empty in ('', b'', '# nothing\n', '---\n'):
         assert read_cell_yaml(empty, 'c') is None
     assert 'not valid text' in str(_refusal('cell: "\ud800"'))
+
+
+def test_only_a_regular_file_of_at_most_the_limit_is_read(tmp_path, default_text):
+    fifo = tmp_path / 'cell.fifo'
+    os.mkfifo(fifo)  # opening it to read would wait for a writer for ever
+    for path in (fifo, '/dev/zero', tmp_path):
+        with pytest.raises(CellError) as info:
+            Cell.from_yaml(path)
+        assert info.value.path == str(path) and 'cannot read' in info.value.reason
+    big = tmp_path / 'big.yaml'
+    big.write_text(default_text + '#' * cell_file.MAX_BYTES)
+    with pytest.raises(CellError, match='more than a cell file may be'):
+        Cell.from_yaml(big)
+    assert cell_file.read_cell_file(default_cell_path()) == default_cell_path().read_bytes()

@@ -1,6 +1,7 @@
 """The planning node in-process: requests, answers, markers, services, bad input, load."""
 
 import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from independent import check
@@ -215,7 +216,7 @@ def test_a_failed_rebuild_keeps_serving_the_last_good_roadmap(harness, tmp_path,
         monkeypatch.setattr(worker, 'load_or_build', broken)
         why = 'internal error: RuntimeError: no roadmap today'
     else:
-        why = f"No such file or directory: '{cell_file}'"
+        why = f'{cell_file}: cannot read: No such file or directory'
     node = harness.node
     try:
         assert node.set_parameters([Parameter('cell_file', value=str(cell_file))])[0].successful
@@ -288,6 +289,21 @@ def test_each_request_is_planned_on_the_roadmap_in_force_when_it_arrived(
         assert harness.call('rebuild_roadmap').success
         wait_for(lambda: harness.status()['busy_with'] != 'load', 120)
     assert harness.status()['hash'] == old
+
+
+def test_angles_read_for_other_joints_are_refused_not_moved_to(harness, default_cell):
+    # A rebuild can switch roadmaps between a joint request's receipt and its reading;
+    # angles read for one robot's joints must not be planned on another's.
+    from wafer_planner_ros.node.requests import Request
+    q = [s.configs[0].q for s in default_cell.stations.values()][:2]
+    worker = harness.node._worker
+    for request_id, joints, code in (('other-joints', ('elbow', 'shoulder', 'wrist'),
+                                      'JOINT_MISMATCH'),
+                                     ('same-joints', default_cell.robot.joint_names, 'OK')):
+        worker.enqueue(0, Request(request_id, q[0], q[1], tuple(joints)), time.monotonic())
+        result = harness.result(request_id)
+        assert values(result)['code'] == code, result.message
+    assert 'a rebuild changed them' in harness.result('other-joints').message
 
 
 def test_the_fuzzers_overflowing_request_leaves_the_node_serving(harness):

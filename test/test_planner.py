@@ -6,12 +6,14 @@ from independent import check
 import numpy as np
 import pytest
 
+from wafer_planner_ros.bspline import CubicBSpline
 from wafer_planner_ros.cache import load_or_build
 from wafer_planner_ros.cli.plan import station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings, STAGES
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.verify import verify
 
 
 @pytest.fixture(scope='module')
@@ -154,3 +156,15 @@ def test_a_clearance_margin_is_kept_by_roadmap_curve_and_verification(
         assert result.metrics['min_clearance'] > margin
         t = np.linspace(0.0, result.cycle_time, 20001)
         assert plain.clearance(result.spline.evaluate(t)).min() > margin
+
+
+def test_verification_fails_a_curve_that_is_not_finite_inside(default_cell, default_roadmap):
+    result = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
+    points = result.spline.control_points.copy()
+    points[len(points) // 2, 1] = np.nan  # ends exact, a stretch in the middle undefined
+    broken = CubicBSpline(result.spline.knots, points)
+    checked = verify(broken, default_cell, result.start_q, result.goal_q)
+    assert not checked.ok
+    assert 'the position is not finite everywhere' in checked.problems
+    assert any(p.startswith('collision') for p in checked.problems)
+    assert verify(result.spline, default_cell, result.start_q, result.goal_q).ok

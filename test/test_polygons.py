@@ -553,3 +553,19 @@ def test_touches_or_overlaps():
     # Collinear with a wall but apart from it: the old segment test said they touch.
     assert not touches_or_overlaps(square, [(2, 0), (3, 0), (3, 1)])
     assert not touches_or_overlaps(square, [(1.5, 1.5), (2, 1.5), (2, 2)])
+
+
+def test_a_coordinate_too_small_for_the_fast_arithmetic_is_still_judged_exactly():
+    # 1e-300 is below 2**-300: the turns that involve it are decided with fractions.
+    square = np.array([[0.0, 0.0], [1.0, 1e-300], [1.0, 1.0], [0.0, 1.0]])
+    assert simple_polygon(square).points.shape == (4, 2)
+    assert geos_valid(square)
+    bowtie = np.array([[0.0, 0.0], [1.0, 1e-300], [0.0, 1.0], [1.0, 1.0]])
+    with pytest.raises(PolygonError, match='self-intersecting: edges 1 and 3'):
+        simple_polygon(bowtie)
+    assert not geos_valid(bowtie)
+    # A vertex exactly on an edge, found although the edge's end is 1e-300 off the axis.
+    touching = np.array([[0.0, 0.0], [2.0, 2e-300], [2.0, 1.0], [1.0, 1e-300], [0.0, 1.0]])
+    with pytest.raises(PolygonError, match='meet at'):
+        simple_polygon(touching)
+    assert exact_valid(touching) is False

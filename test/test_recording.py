@@ -362,13 +362,14 @@ def test_the_node_says_how_many_answers_a_failed_recording_has_not_recorded(tmp_
     data = _answer(1)[0][1]
     assert recording.answer(1, [(TOPICS[1].name, data)]) is True
     shutil.rmtree(directory)
-    assert recording.answer(2, [(TOPICS[1].name, data)]) is False
+    # Not recorded at all (lost, counted below), rather than recorded late.
+    assert recording.answer(2, [(TOPICS[1].name, data)]) is None
     status = recording.status()
     assert not status['recording'] and status['recording_lost'] == 1
     assert status['recording_error'] == \
         f'recording stopped: {directory} was deleted; 1 answer not recorded'
     assert errors == [f'recording stopped: {directory} was deleted']
-    assert recording.answer(3, [(TOPICS[1].name, data)]) is False
+    assert recording.answer(3, [(TOPICS[1].name, data)]) is None
     assert recording.status()['recording_error'].endswith('; 2 answers not recorded')
     assert recording.stop() == (directory, f'recording stopped: {directory} was deleted; '
                                            '2 answers not recorded')
@@ -380,7 +381,7 @@ def test_the_node_says_how_many_answers_a_failed_recording_has_not_recorded(tmp_
     def full() -> None:
         raise OSError(errno.ENOSPC, 'No space left on device')
     recording._recorder._writer.flush = full
-    assert [recording.answer(k, [(TOPICS[1].name, data)]) for k in (1, 2, 3)] == [False] * 3
+    assert [recording.answer(k, [(TOPICS[1].name, data)]) for k in (1, 2, 3)] == [None] * 3
     status = recording.status()
     assert status['recording_lost'] == 3 and str(directory) in status['recording_error']
     assert status['recording_error'].endswith('No space left on device; 3 answers not recorded')

@@ -171,11 +171,13 @@ def test_a_deleted_recording_directory_shows_as_warn_within_one_request(harness)
     harness.peer.create_subscription(DiagnosticArray, '/diagnostics', inbox.append, 10)
     bag = Path(harness.status()['recording_directory'])
     assert harness.status()['recording'] and bag.is_dir()
+    before = harness.status()['answers_before_recorded']
     shutil.rmtree(bag)
     harness.send_stations({'id': 'into-the-void', 'from': 'loadport2', 'to': 'loadlock1'})
     assert values(harness.result('into-the-void'))['code'] == 'OK'
     status = harness.status()
     assert not status['recording'] and status['recording_lost'] == 1
+    assert status['answers_before_recorded'] == before  # lost, not recorded late
     assert status['recording_error'] == \
         f'recording stopped: {bag} was deleted; 1 answer not recorded'
 
@@ -183,6 +185,9 @@ def test_a_deleted_recording_directory_shows_as_warn_within_one_request(harness)
         return any(s.level == DiagnosticStatus.WARN and f'{bag} was deleted' in s.message
                    for array in inbox for s in array.status)
     wait_for(warned, 5)  # published once a second
+    # recording.enabled follows: a recording that stopped by itself is not enabled.
+    wait_for(lambda: harness.node.get_parameter('recording.enabled').value is False, 5)
     assert not bag.exists()
     assert _start(harness) != bag
+    assert harness.node.get_parameter('recording.enabled').value is True
     assert harness.status()['recording'] and not harness.status()['recording_error']

@@ -16,7 +16,7 @@ from typing import Mapping, Optional, Tuple
 
 import numpy as np
 from wafer_planner_ros import schema
-from wafer_planner_ros.cell_file import read_cell_yaml
+from wafer_planner_ros.cell_file import read_cell_file, read_cell_yaml
 from wafer_planner_ros.clearance import ClearanceModel
 from wafer_planner_ros.errors import CellError
 from wafer_planner_ros.geometry import points_in_polygon
@@ -30,6 +30,8 @@ MAX_MOTION_TIME = 3600.0
 """s: a limit under which one motion across the cell would take longer is refused."""
 MAX_COORDINATE = 1000.0
 """m: the largest |x| or |y| of a polygon vertex or the base (an EFEM is a few metres)."""
+NOTES_LISTED = 5
+"""The notes (dropped vertices) listed per polygon; then how many more there are."""
 MAX_JOINT_ANGLE = 100.0
 """rad: the largest |position limit| (about 16 turns)."""
 
@@ -151,12 +153,7 @@ class Cell:
     @classmethod
     def from_yaml(cls, path) -> 'Cell':
         """Load and validate a cell file; raise CellError naming the bad key."""
-        path = Path(path)
-        try:
-            text = path.read_bytes()
-        except OSError as exc:
-            raise CellError(str(path), f'cannot read: {exc.strerror}') from None
-        return cls.from_text(text, source=str(path))
+        return cls.from_text(read_cell_file(path), source=str(path))
 
     @classmethod
     def from_text(cls, text, source: str) -> 'Cell':
@@ -256,7 +253,10 @@ def _polygon(value, path: str, notes: list) -> np.ndarray:
         polygon = simple_polygon(points)
     except PolygonError as exc:
         raise CellError(path, exc.reason) from None
-    notes.extend(f'{path}: {note}' for note in polygon.notes)
+    notes.extend(f'{path}: {note}' for note in polygon.notes[:NOTES_LISTED])
+    if len(polygon.notes) > NOTES_LISTED:
+        notes.append(f'{path}: and {len(polygon.notes) - NOTES_LISTED} more repeated vertices '
+                     'were dropped')
     return polygon.points
 
 
@@ -339,8 +339,7 @@ def _check_motion_times(robot: Robot, boundary: np.ndarray) -> None:
                 what = f'moving the wafer by {distances[i]:.3g} m'
             else:
                 path = f'robot.joint_limits.{kind}[{i}]'
-                what = (f'moving joint {robot.joint_names[i]} by '
-                        f'({distances[i]:.3g} rad)')
+                what = f'moving joint {robot.joint_names[i]} by {distances[i]:.3g} rad'
             raise CellError(path, f'{values[i]:.3g} {unit} is too small: {what} would take '
                                   f'at least {times[i]:.3g} s (more than '
                                   f'{MAX_MOTION_TIME:.0f} s)')

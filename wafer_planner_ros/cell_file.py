@@ -23,7 +23,10 @@ parser that found them).
 """
 
 import codecs
+import os
+from pathlib import Path
 import re
+import stat
 from typing import Optional, Union
 
 from wafer_planner_ros import schema
@@ -93,6 +96,27 @@ def read_cell_yaml(text: Union[bytes, str], source: str,
     finally:
         if loader is not None:
             loader.dispose()
+
+
+def read_cell_file(path) -> bytes:
+    """
+    Return the bytes of the cell file at ``path``, reading at most MAX_BYTES + 1 of them.
+
+    Raise CellError for a file that cannot be read, is not a regular file (a FIFO or
+    ``/dev/zero`` would never end), or is over the size limit, before reading more of it.
+    """
+    path = Path(path)
+    try:
+        # Non-blocking: opening a FIFO for reading would otherwise wait for a writer.
+        with open(os.open(path, os.O_RDONLY | os.O_NONBLOCK), 'rb') as stream:
+            if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+                raise CellError(str(path), 'cannot read: not a regular file')
+            data = stream.read(MAX_BYTES + 1)
+    except OSError as exc:
+        raise CellError(str(path), f'cannot read: {exc.strerror or exc}') from None
+    if len(data) > MAX_BYTES:
+        raise _too_big(f'over {MAX_BYTES:,} bytes', str(path))
+    return data
 
 
 def _text(text: Union[bytes, str], source: str) -> str:

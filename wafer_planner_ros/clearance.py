@@ -4,8 +4,9 @@ Vectorised collision and clearance of the arm against the enclosure (bulk checke
 The robot is four bodies: three link capsules (a segment swept by a radius) and the wafer
 disc (a zero-length segment at the wafer centre swept by the wafer radius). The enclosure is
 the boundary polygon (the robot stays inside) and obstacle polygons (the robot stays
-outside). A body's clearance is its distance to the nearest polygon edge minus its radius;
-crossing an edge counts as distance zero. Because the arm is a chain from the shoulder,
+outside). A body's clearance is its distance to the nearest polygon edge minus its radius
+and the clearance margin (every body is grown by it); crossing an edge counts as distance
+zero. Because the arm is a chain from the shoulder,
 which the cell model requires to be in free space, a body cannot leave the boundary or enter
 an obstacle without crossing an edge, so edge distances decide collision exactly. This is
 the fast path used to build the roadmap; ``fcl_model`` is the reference it is tested against.
@@ -103,7 +104,11 @@ class ClearanceModel:
         configuration only the non-positive values mean something: a body beyond a link that
         crosses the boundary can be wholly outside it and still show a positive value.
         """
-        return self._distances(q, per_edge=False) - self.radii
+        q = np.asarray(q, dtype=float)
+        clearance = self._distances(q, per_edge=False) - self.radii
+        # The kernel's min() passes over NaN: a configuration that is not finite is nowhere.
+        clearance[~np.isfinite(q.reshape(-1, 3)).all(axis=1)] = -np.inf
+        return clearance
 
     def _distances(self, q: np.ndarray, per_edge: bool) -> np.ndarray:
         q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=float)))

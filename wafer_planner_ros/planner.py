@@ -19,6 +19,7 @@ import numpy as np
 from wafer_planner_ros.bspline import CubicBSpline
 from wafer_planner_ros.corridor import build_corridor, simplify
 from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.schema import brief
 from wafer_planner_ros.search import find_path
 from wafer_planner_ros.shortcut import shortcut
 from wafer_planner_ros.timing import optimise, scaled_start, Timing, TimingProblem
@@ -28,6 +29,10 @@ logger = logging.getLogger(__name__)
 
 STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify')
 
+KNOWN_LISTED = 10
+"""The stations an UNKNOWN_STATION message lists (then how many more there are)."""
+MAX_QUOTED = 200
+"""Most characters of a requested station name quoted in a message."""
 SAMPLE_PERIOD_RANGE = (0.001, 1.0)
 """s: the shortest and longest step between returned samples (the verification's is 1 ms)."""
 
@@ -123,9 +128,13 @@ class Planner:
         if isinstance(value, str):
             station = self.cell.stations.get(value)
             if station is None:
+                names = sorted(self.cell.stations)
+                known = ', '.join(names[:KNOWN_LISTED]) + (
+                    f' and {len(names) - KNOWN_LISTED} more' if len(names) > KNOWN_LISTED
+                    else '')
                 raise PlanningError(ErrorCode.UNKNOWN_STATION,
-                                    f'{role} {value!r} is not a station of cell '
-                                    f'{self.cell.name} ({", ".join(sorted(self.cell.stations))})')
+                                    f'{role} {value[:MAX_QUOTED]!r} is not a station of cell '
+                                    f'{self.cell.name} ({known[:4 * MAX_QUOTED]})')
             joints = 'joints' in station.spec
             return Endpoint(value, tuple((None if joints else c.elbow, c.q)
                                          for c in station.configs))
@@ -133,7 +142,7 @@ class Planner:
             q = np.asarray(value, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise PlanningError(ErrorCode.INVALID_REQUEST,
-                                f'{role} {value!r} is neither a station nor joint '
+                                f'{role} {brief(value)} is neither a station nor joint '
                                 'angles') from None
         if q.size != len(robot.joint_names):
             raise PlanningError(ErrorCode.JOINT_MISMATCH,

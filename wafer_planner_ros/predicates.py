@@ -94,9 +94,24 @@ def _orient_expansion(ax, ay, bx, by, cx, cy):
 
 
 @njit(cache=True)
+def _in_range(ax, ay, bx, by, cx, cy):
+    """Return whether every non-zero coordinate of the three points is in the safe range."""
+    for v in (ax, ay, bx, by, cx, cy):
+        size = abs(v)
+        if size != 0.0 and not _SAFE_MIN <= size <= _SAFE_MAX:
+            return False
+    return True
+
+
+@njit(cache=True)
 def orient(ax, ay, bx, by, cx, cy, safe):
-    """Return the exact sign of the turn a -> b -> c (1 left, -1 right, 0 collinear)."""
-    if not safe:
+    """
+    Return the exact sign of the turn a -> b -> c (1 left, -1 right, 0 collinear).
+
+    ``safe``: every coordinate of the polygon is known to be in the safe range (``is_safe``);
+    when it is not, only a turn whose own points are outside it takes the slow exact path.
+    """
+    if not safe and not _in_range(ax, ay, bx, by, cx, cy):
         with numba.objmode(sign='int64'):
             sign = _orient_fraction(ax, ay, bx, by, cx, cy)
         return sign

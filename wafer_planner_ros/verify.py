@@ -57,8 +57,13 @@ def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
     if robot.wafer_acceleration_norm_limit is not None:
         ratios['wafer_norm'] = float(np.max(np.hypot(wafer[:, 0], wafer[:, 1]))
                                      / robot.wafer_acceleration_norm_limit)
+    # Written so that NaN fails: every comparison with NaN is false.
     problems = [f'{name} reaches {ratio:.4f} x its limit'
-                for name, ratio in ratios.items() if ratio > 1.0]
+                for name, ratio in ratios.items() if not ratio <= 1.0]
+    for name, values in (('position', q), ('velocity', qd), ('acceleration', qdd),
+                         ('jerk', qddd)):
+        if not np.isfinite(values).all():
+            problems.append(f'the {name} is not finite everywhere')
     lower, upper = limits.position.T
     outside = np.nonzero(np.any((q < lower) | (q > upper), axis=0))[0]
     problems += [f'joint {robot.joint_names[j]} leaves its position limits' for j in outside]
@@ -70,7 +75,7 @@ def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
     # The model's bodies are grown by the clearance margin: <= 0 is closer than the margin.
     clearance, checks = dense_clearance(spline, cell.clearance_model)
     distance = clearance + robot.clearance_margin
-    if clearance <= 0.0:
+    if not clearance > 0.0:
         problems.append(f'collision (clearance {distance * 1000:.2f} mm' + (
             f', margin {robot.clearance_margin * 1000:.2f} mm)'
             if robot.clearance_margin else ')'))
@@ -98,6 +103,9 @@ def collision_times(spline) -> np.ndarray:
     seconds apart. The first and last times are 0 and the duration.
     """
     boundaries, peaks = spline.peak_speed()
+    # A piece whose speed is not finite fails verification anyway (and its configurations
+    # count as colliding): one check is enough there, not a count cast from NaN.
+    peaks = np.where(np.isfinite(peaks), peaks, 0.0)
     lengths = np.diff(boundaries)
     counts = np.maximum(np.ceil(lengths * peaks.max(axis=1) / COLLISION_STEP).astype(int), 1)
     offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)

@@ -3,6 +3,7 @@
 import argparse
 import json
 import logging
+import os
 import sys
 
 from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
@@ -69,6 +70,11 @@ def run(main, argv=None) -> int:
         return EXIT_USAGE
     except WaferPlannerError as exc:
         print(f'error: {exc}', file=sys.stderr)
+        return EXIT_FAILURE
+    except BrokenPipeError:
+        # The reader went away (`| head`): no traceback, and none at exit when Python
+        # flushes stdout again (the Python documentation's recipe).
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_FAILURE
 
 

@@ -37,7 +37,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.errors import ErrorCode
-from wafer_planner_ros.node.faults import reason_of
+from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
@@ -62,7 +62,7 @@ def _service(callback):
         try:
             return callback(node, request, response)
         except Exception as exc:  # noqa: B902 - the node serves on
-            node.get_logger().error(f'{callback.__name__}: internal error: {exc!r}')
+            node.log.error(f'{callback.__name__}: internal error: {reason_of(exc)}')
             response.success, response.message = False, f'internal error: {reason_of(exc)}'
             return response
     return guarded
@@ -74,6 +74,8 @@ class WaferPlannerNode(Node):
     def __init__(self, **kwargs):
         """Declare and check the parameters, set up the interfaces, start the worker."""
         super().__init__('wafer_planner', **kwargs)
+        self.log = SafeLogger(self.get_logger())
+        """The logger of the failure paths: it never raises."""
         self.add_on_set_parameters_callback(self._on_set_parameters)
         for spec in PARAMETERS:
             self.declare_parameter(spec.name, spec.default, _descriptor(spec))
@@ -128,7 +130,7 @@ class WaferPlannerNode(Node):
         try:
             self._take_request(kind, topic, message_type, data, info)
         except Exception as exc:  # noqa: B902 - the last resort: the node serves on
-            self.get_logger().error(f'a request on {topic} was lost: {exc!r}')
+            self.log.error(f'a request on {topic} was lost: {reason_of(exc)}')
 
     def _take_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
         """Record, read and check a request, then queue it: one answer, whatever happens."""
@@ -137,7 +139,7 @@ class WaferPlannerNode(Node):
         try:
             self._recording.request(topic, data, number, info)
         except Exception as exc:  # noqa: B902 - planning goes on without recording
-            self.get_logger().error(f'request {number} not recorded: {exc!r}')
+            self.log.error(f'request {number} not recorded: {reason_of(exc)}')
         request_id = ''
         try:
             try:
@@ -184,7 +186,7 @@ class WaferPlannerNode(Node):
             try:
                 self._deliver_one(kind, msg, number)
             except Exception as exc:  # noqa: B902 - the next answers still go out
-                self.get_logger().error(f'query {number}: {kind} not published: {exc!r}')
+                self.log.error(f'query {number}: {kind} not published: {reason_of(exc)}')
 
     def _deliver_one(self, kind: str, msg, number: int) -> None:
         if kind in ('answer', 'result'):
@@ -197,7 +199,7 @@ class WaferPlannerNode(Node):
                 recorded = self._recording.answer(number, [(p.topic_name, data)
                                                            for p, data in out])
             except Exception as exc:  # noqa: B902 - the answer goes out all the same
-                self.get_logger().error(f'query {number}: answer not recorded: {exc!r}')
+                self.log.error(f'query {number}: answer not recorded: {reason_of(exc)}')
                 recorded = False
             if recorded is False:
                 self._late_records += 1
@@ -240,14 +242,19 @@ class WaferPlannerNode(Node):
         else:
             response.success, response.message = self._stop_recording()
             self._log_closed(response.success, response.message)
-        # Keep recording.enabled telling the truth (without switching a second time).
+        self._sync_recording_enabled()
+        return response
+
+    def _sync_recording_enabled(self) -> None:
+        """Keep recording.enabled telling the truth (without switching a second time)."""
+        recording = bool(self._recording.status()['recording'])
+        if self.get_parameter('recording.enabled').value == recording:
+            return
         self._switching_recording = True
         try:
-            self.set_parameters([Parameter('recording.enabled',
-                                           value=bool(self._recording.status()['recording']))])
+            self.set_parameters([Parameter('recording.enabled', value=recording)])
         finally:
             self._switching_recording = False
-        return response
 
     def _log_closed(self, success: bool, message: str) -> None:
         if message == 'not recording':
@@ -288,9 +295,10 @@ class WaferPlannerNode(Node):
 
     def _publish_health(self) -> None:
         try:
+            self._sync_recording_enabled()  # a recording that stopped by itself: false
             self._diagnostics_pub.publish(self._health())
         except Exception as exc:  # noqa: B902 - health is reported again in a second
-            self.get_logger().error(f'/diagnostics not published: {exc!r}')
+            self.log.error(f'/diagnostics not published: {reason_of(exc)}')
 
     def _health(self) -> DiagnosticArray:
         status = self.status()
@@ -345,7 +353,7 @@ class WaferPlannerNode(Node):
                     else:
                         self._log_closed(*self._stop_recording())
             except Exception as exc:  # noqa: B902 - the parameters are set all the same
-                self.get_logger().error(f'recording the parameters failed: {exc!r}')
+                self.log.error(f'recording the parameters failed: {reason_of(exc)}')
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:

@@ -59,6 +59,9 @@ class NodeRecording:
         with self._lock:
             if self._recorder is not None and not self._recorder.error:
                 return self._recorder.directory
+            failed = self._recorder
+        if failed is not None:
+            failed.close(timeout=1.0)  # a stopped recording's thread ends with it
         directory = Path(parent).expanduser() / bag_name(self._node_name)
         try:  # not under the lock: the worker needs it, and a dead mount may hang here
             recorder = Recorder(directory, self._topics, self._failed)
@@ -103,14 +106,16 @@ class NodeRecording:
         """
         Record the answer to query ``number`` (its trajectory and result) before it goes out.
 
-        Return True once a process crash can no longer lose it, False when it could not be
-        made safe (a stalled disk, a failed recording), None when not recording.
+        Return True once a process crash can no longer lose it, False when it goes out
+        before it is safe (a stalled disk: it is queued), None when it is not recorded (not
+        recording, or the recording has stopped: the recorder counts it as lost).
         """
         recorder = self._recorder
         if recorder is None:
             return None
         now = time.time_ns()
-        return recorder.write_now([(topic, data, now, now, number) for topic, data in messages])
+        safe = recorder.write_now([(topic, data, now, now, number) for topic, data in messages])
+        return None if safe is False and recorder.error else safe
 
     def loaded(self, loaded: Loaded) -> None:
         """Record a new roadmap before it serves (and keep it for a bag started later)."""

@@ -14,7 +14,7 @@ planner then checks the values themselves (limits, collision, known station).
 from dataclasses import dataclass
 import json
 import math
-from typing import Optional, Sequence, Union
+from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -41,6 +41,8 @@ class Request:
     request_id: str
     start: End
     goal: End
+    read_for: Tuple[str, ...] = ()
+    """The robot's joint names the ends were read against (ordered, counted); () if none."""
 
 
 class RequestError(Exception):
@@ -127,7 +129,7 @@ def joint_request(request_id: str, joint_names: Sequence[str],
                                f'the {label} point is not finite: {robot_joints[joint]} = '
                                f'{values[joint]}', request_id)
         ends.append(values)
-    return Request(request_id, ends[0], ends[1])
+    return Request(request_id, ends[0], ends[1], tuple(robot_joints))
 
 
 def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
@@ -162,7 +164,7 @@ def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
             raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
                                request_id)
         ends.append(_end(data[key], key, request_id, robot_joints))
-    return Request(request_id, ends[0], ends[1])
+    return Request(request_id, ends[0], ends[1], tuple(robot_joints))
 
 
 def quote(value, limit: int = QUOTE) -> str:

@@ -24,6 +24,7 @@ from rclpy.serialization import serialize_message
 
 from wafer_planner_ros.cache import CachedRoadmap, load_or_build
 from wafer_planner_ros.cell import Cell
+from wafer_planner_ros.cell_file import read_cell_file
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
 from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
@@ -159,7 +160,7 @@ class PlanningWorker:
                                                 f'{code.value}: {message}',
                                                 {'code': code.value})
             except Exception as again:  # noqa: B902 - nothing left to answer with
-                self._logger.error(f'query {number}: no answer could be made: {again!r}')
+                self._logger.error(f'query {number}: no answer could be made: {reason_of(again)}')
                 return
         self._logger.warning(f'request {request_id or "(no id)"}: {code.value}: {message}')
         with self.lock:
@@ -171,7 +172,7 @@ class PlanningWorker:
                         start=None, goal=None, planning_ms=None, roadmap=None) -> None:
         """Send the ``INTERNAL`` answer of query ``number``, failed while ``doing``."""
         self._logger.error(f'request {request_id or "(no id)"}: internal error while '
-                           f'{doing}: {exc!r}'[:2000])
+                           f'{doing}: {reason_of(exc)}'[:2000])
         self.answer_error(number, request_id, ErrorCode.INTERNAL,
                           f'internal error while {doing}: {reason_of(exc)}', start, goal,
                           planning_ms, roadmap)
@@ -224,7 +225,7 @@ class PlanningWorker:
             try:
                 self._plan(*item)
             except Exception as exc:  # noqa: B902 - the thread outlives any one request
-                self._logger.error(f'planning thread: {exc!r}')
+                self._logger.error(f'planning thread: {reason_of(exc)}')
             finally:
                 with self.lock:
                     self._planning = False
@@ -255,6 +256,17 @@ class PlanningWorker:
                                   request.goal)
                 return
             planner, roadmap = serving.planner, serving.cached.roadmap
+            joints = planner.cell.robot.joint_names
+            angles = any(not isinstance(end, str) for end in (request.start, request.goal))
+            if angles and request.read_for and tuple(request.read_for) != joints:
+                # Read for the cell that served at receipt, planned on another (a rebuild
+                # in between changed the joints): its angles would mean other joints.
+                self.answer_error(number, request.request_id, ErrorCode.JOINT_MISMATCH,
+                                  f'the request was read for joints {list(request.read_for)}, '
+                                  f'but the roadmap it is planned on has {list(joints)} (a '
+                                  'rebuild changed them): send it again', request.start,
+                                  request.goal, roadmap=roadmap)
+                return
             if planner.settings.sample_period != settings.sample_period:
                 planner = Planner(planner.cell, planner.roadmap,
                                   PlannerSettings(sample_period=settings.sample_period))
@@ -294,7 +306,7 @@ class PlanningWorker:
         try:
             path = markers.path_markers(planner.cell, result, settings.frame_id, stamp)
         except Exception as exc:  # noqa: B902 - answered already: only the picture is lost
-            self._logger.error(f'request {request.request_id}: no path markers: {exc!r}')
+            self._logger.error(f'request {request.request_id}: no path markers: {reason_of(exc)}')
             return
         self._send(('path', path, number))
 
@@ -314,7 +326,7 @@ class PlanningWorker:
         settings = self._settings()
         started = time.monotonic()
         try:
-            cell_text = settings.cell_file.read_bytes()  # the very text that is recorded
+            cell_text = read_cell_file(settings.cell_file)  # the very text that is recorded
             cell = Cell.from_text(cell_text, str(settings.cell_file))
         except Exception as exc:  # noqa: B902 - the node stays up and says why
             self._load_failed(exc, settings.cell_file)
@@ -352,7 +364,7 @@ class PlanningWorker:
                 'roadmap_nodes': str(settings.nodes), 'roadmap_seed': str(roadmap.seed),
                 'roadmap_edges': str(roadmap.edge_count)}, loaded_ns))
         except Exception as exc:  # noqa: B902 - a recording's failure is not the roadmap's
-            self._logger.error(f'the roadmap load was not recorded: {exc!r}')
+            self._logger.error(f'the roadmap load was not recorded: {reason_of(exc)}')
         finally:
             with self.lock:
                 self._pending_ns = None  # first: planning waits while it is set
@@ -367,7 +379,7 @@ class PlanningWorker:
             self._send(('markers', roadmap_markers, 0))
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
-            self._logger.error(f'roadmap markers not published: {exc!r}')
+            self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
         self._logger.info(
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
