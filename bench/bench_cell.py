@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 import shapely
-from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError
-from wafer_planner_ros.polygons import simple_polygon
+from wafer_planner_ros.geometry.polygons import simple_polygon
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'cell.json'
 

@@ -24,11 +24,11 @@ import toppra
 import toppra.algorithm
 import toppra.constraint as tc
 
-from wafer_planner_ros.cache import load_or_build
-from wafer_planner_ros.cell import Cell, default_cell_path
-from wafer_planner_ros.cli.plan import station_pairs
+from wafer_planner_ros.cell.model import Cell, default_cell_path
+from wafer_planner_ros.cell.model import station_pairs
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, STAGES
+from wafer_planner_ros.roadmap.cache import load_or_build
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'plan.json'
 GRID = 2001

@@ -20,9 +20,9 @@ RESULTS = Path(__file__).resolve().parent / 'results' / 'roadmap.json'
 
 _CHILD = r"""
 import json, resource, sys, time
-from wafer_planner_ros.cache import load_or_build
-from wafer_planner_ros.cell import Cell, default_cell_path
-from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.cell.model import Cell, default_cell_path
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
 cell = Cell.from_yaml(default_cell_path())
 settings = RoadmapSettings(nodes=int(sys.argv[1]))
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from wafer_planner_ros.cache import load_or_build
-from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.cell.model import Cell, default_cell_path
+from wafer_planner_ros.roadmap.cache import load_or_build
 
 CELL_DIR = Path(__file__).resolve().parent / 'cells'
 CELL_FILES = {'default': default_cell_path(), 'pillar': CELL_DIR / 'pillar.yaml',

@@ -11,9 +11,9 @@ import time
 import numpy as np
 import pytest
 
-from wafer_planner_ros import cache
-from wafer_planner_ros.cache import CacheStatus, load_or_build
-from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.roadmap import cache
+from wafer_planner_ros.roadmap.cache import CacheStatus, load_or_build
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
 
 SMALL = RoadmapSettings(nodes=200)
 
@@ -44,7 +44,7 @@ def test_other_seed_or_settings_use_another_file(default_cell, built):
 
 
 def _rejected(default_cell, folder, status, caplog):
-    with caplog.at_level(logging.WARNING, logger='wafer_planner_ros.cache'):
+    with caplog.at_level(logging.WARNING, logger='wafer_planner_ros.roadmap.cache'):
         result = load_or_build(default_cell, SMALL, 3, folder)
     assert result.status is status
     assert any('rebuilding' in r.getMessage() for r in caplog.records)
@@ -98,7 +98,7 @@ def test_file_from_another_cell_is_reported_and_rebuilt(default_cell, cell, buil
 def test_unwritable_cache_still_builds(default_cell, tmp_path, caplog):
     blocker = tmp_path / 'file'
     blocker.write_text('not a directory')
-    with caplog.at_level(logging.WARNING, logger='wafer_planner_ros.cache'):
+    with caplog.at_level(logging.WARNING, logger='wafer_planner_ros.roadmap.cache'):
         result = load_or_build(default_cell, SMALL, 3, blocker / 'cache')
     assert result.roadmap.node_count >= 200
     assert any('cannot write' in r.getMessage() for r in caplog.records)
@@ -114,8 +114,8 @@ import os, signal, sys
 from pathlib import Path
 from types import SimpleNamespace
 import numpy as np
-from wafer_planner_ros import cache
-from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.roadmap import cache
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
 
 
 def savez(stream, **arrays):  # killed half way through writing, as by SIGKILL or OOM
@@ -150,7 +150,7 @@ def test_a_killed_writers_temporary_file_is_removed_once_stale(default_cell, bui
         path.write_text('someone else')
     for path in (old, *kept):
         os.utime(path, (stale, stale))
-    with caplog.at_level(logging.INFO, logger='wafer_planner_ros.cache'):
+    with caplog.at_level(logging.INFO, logger='wafer_planner_ros.roadmap.cache'):
         again = load_or_build(default_cell, SMALL, 3, folder)
     assert again.hit
     assert not old.exists() and recent.exists() and all(path.exists() for path in kept)

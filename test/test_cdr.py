@@ -7,7 +7,7 @@ from rclpy.serialization import deserialize_message
 from rosbags.typesys import get_typestore, Stores
 from trajectory_msgs.msg import JointTrajectory
 
-from wafer_planner_ros.node.cdr import diagnostic_status, joint_trajectory
+from wafer_planner_ros.service.cdr import diagnostic_status, joint_trajectory
 
 
 @pytest.mark.parametrize('frame_id', ['', 'r', 'r17', 'request-0123456', 'ünïcode'])

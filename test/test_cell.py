@@ -6,9 +6,9 @@ import warnings
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
-from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError
-from wafer_planner_ros.geometry import cross2
+from wafer_planner_ros.geometry.planar import cross2
 import yaml
 
 

@@ -5,9 +5,10 @@ import os
 import time
 
 import pytest
-from wafer_planner_ros import cell_file, schema
-from wafer_planner_ros.cell import Cell, default_cell_path
-from wafer_planner_ros.cell_file import read_cell_yaml
+from wafer_planner_ros.cell import document as cell_file
+from wafer_planner_ros.cell import schema
+from wafer_planner_ros.cell.document import read_cell_yaml
+from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError
 import yaml
 

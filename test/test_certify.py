@@ -3,7 +3,7 @@
 from dense_check import colliding_segments, segment_points
 import numpy as np
 
-from wafer_planner_ros.certify import certify_segments
+from wafer_planner_ros.geometry.certify import certify_segments
 
 
 def _free(cell, n, rng):

@@ -2,7 +2,7 @@
 
 import json
 
-from wafer_planner_ros.cell import default_cell_path
+from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.plan import main
 

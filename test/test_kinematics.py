@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from wafer_planner_ros.kinematics import wrap_into_limits
+from wafer_planner_ros.geometry.kinematics import wrap_into_limits
 
 
 def test_joint_points_of_a_straight_and_a_folded_arm(default_cell):

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from wafer_planner_ros.lipschitz import box_half_widths, joint_constants
+from wafer_planner_ros.geometry.lipschitz import box_half_widths, joint_constants
 
 
 def _body_points(robot, q, rng, per_body=64):

@@ -12,9 +12,9 @@ import rclpy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
-from wafer_planner_ros.cache import load_or_build
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.report import plan_json, roadmap_json
+from wafer_planner_ros.roadmap.cache import load_or_build
 
 
 def test_station_request_publishes_the_core_planners_trajectory(harness, default_cell,
@@ -294,7 +294,7 @@ def test_each_request_is_planned_on_the_roadmap_in_force_when_it_arrived(
 def test_angles_read_for_other_joints_are_refused_not_moved_to(harness, default_cell):
     # A rebuild can switch roadmaps between a joint request's receipt and its reading;
     # angles read for one robot's joints must not be planned on another's.
-    from wafer_planner_ros.node.requests import Request
+    from wafer_planner_ros.service.requests import Request
     q = [s.configs[0].q for s in default_cell.stations.values()][:2]
     worker = harness.node._worker
     for request_id, joints, code in (('other-joints', ('elbow', 'shoulder', 'wrist'),

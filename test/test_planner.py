@@ -6,14 +6,14 @@ from independent import check
 import numpy as np
 import pytest
 
-from wafer_planner_ros.bspline import CubicBSpline
-from wafer_planner_ros.cache import load_or_build
-from wafer_planner_ros.cli.plan import station_pairs
+from wafer_planner_ros.cell.model import station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings, STAGES
 from wafer_planner_ros.report import plan_json, roadmap_json
-from wafer_planner_ros.roadmap import RoadmapSettings
-from wafer_planner_ros.verify import verify
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.verify import verify
 
 
 @pytest.fixture(scope='module')

@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 import shapely
 from shapely.validation import explain_validity
-from wafer_planner_ros.polygons import PolygonError, simple_polygon
-from wafer_planner_ros.polygons import touches_or_overlaps
-from wafer_planner_ros.predicates import orientation
+from wafer_planner_ros.geometry.polygons import PolygonError, simple_polygon
+from wafer_planner_ros.geometry.polygons import touches_or_overlaps
+from wafer_planner_ros.geometry.predicates import orientation
 
 COMPARED = {}
 """Polygons compared with GEOS, per family test."""

@@ -16,13 +16,13 @@ from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.msg import get_types_from_msg
 from std_msgs.msg import String
 
-from wafer_planner_ros.node.cdr import joint_trajectory
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.recording import msgdefs
 from wafer_planner_ros.recording.bag import bag_file, network_filesystem, qos, Topic
 from wafer_planner_ros.recording.reading import read, RecordingError
 from wafer_planner_ros.recording.recorder import Recorder
 from wafer_planner_ros.recording.recover import recover
+from wafer_planner_ros.service.cdr import joint_trajectory
 import yaml
 
 TYPES = ('std_msgs/msg/String', 'trajectory_msgs/msg/JointTrajectory',

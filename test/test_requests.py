@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.errors import ErrorCode
-from wafer_planner_ros.node.requests import (end_label, joint_request, MAX_ID, quote,
-                                             RequestError, station_request)
+from wafer_planner_ros.service.requests import (end_label, joint_request, MAX_ID, quote,
+                                                RequestError, station_request)
 
 JOINTS = ('joint_1', 'joint_2', 'joint_3')
 LONGEST_MESSAGE = 700

@@ -10,14 +10,15 @@ import pytest
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
-from wafer_planner_ros.cell import default_cell_path
+from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.cli.common import EXIT_OK, EXIT_USAGE, run
 from wafer_planner_ros.cli.review import main
 from wafer_planner_ros.errors import PlanningError
-from wafer_planner_ros.node import cdr, messages
+from wafer_planner_ros.node import messages
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.recording.bag import Topic
+from wafer_planner_ros.service import cdr
 
 NODE = '/wafer_planner'
 STATION, TRAJECTORY, RESULT = (f'{NODE}/{name}' for name in

@@ -4,11 +4,11 @@ from dense_check import colliding_segments
 import numpy as np
 import pytest
 
-from wafer_planner_ros.certify import certify_segments
-from wafer_planner_ros.prm import build_roadmap
-from wafer_planner_ros.roadmap import RoadmapSettings, SAMPLER_NAMES
-from wafer_planner_ros.samplers import W_MAX, W_MIN
-from wafer_planner_ros.search import astar, find_path
+from wafer_planner_ros.geometry.certify import certify_segments
+from wafer_planner_ros.roadmap.builder import build_roadmap
+from wafer_planner_ros.roadmap.graph import RoadmapSettings, SAMPLER_NAMES
+from wafer_planner_ros.roadmap.samplers import W_MAX, W_MIN
+from wafer_planner_ros.roadmap.search import astar, find_path
 
 
 def _pairs(cell):
@@ -151,7 +151,7 @@ class _Solid:
 
 
 def test_build_gives_up_with_a_clear_error_when_nothing_is_free(default_cell_file):
-    from wafer_planner_ros.cell import Cell
+    from wafer_planner_ros.cell.model import Cell
     from wafer_planner_ros.errors import WaferPlannerError
     cell = Cell.from_yaml(default_cell_file)
     cell.__dict__['clearance_model'] = _Solid()  # a fresh cell, so no fixture is affected

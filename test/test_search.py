@@ -4,7 +4,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from wafer_planner_ros.search import astar
+from wafer_planner_ros.roadmap.search import astar
 
 
 def test_astar_length_equals_dijkstra_for_many_random_pairs(roadmap):

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from wafer_planner_ros.bspline import CubicBSpline
-from wafer_planner_ros.corridor import build_corridor
-from wafer_planner_ros.search import find_path
-from wafer_planner_ros.timing import MARGIN, optimise, TimingProblem
-from wafer_planner_ros.verify import COLLISION_STEP, collision_times
+from wafer_planner_ros.roadmap.search import find_path
+from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.corridor import build_corridor
+from wafer_planner_ros.trajectory.timing import MARGIN, optimise, TimingProblem
+from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times
 
 
 @pytest.fixture()

@@ -16,14 +16,14 @@ from typing import Mapping, Optional, Tuple
 
 import numpy as np
 
-from wafer_planner_ros.bspline import CubicBSpline
-from wafer_planner_ros.corridor import build_corridor, simplify
+from wafer_planner_ros.cell.schema import brief
 from wafer_planner_ros.errors import ErrorCode, PlanningError
-from wafer_planner_ros.schema import brief
-from wafer_planner_ros.search import find_path
-from wafer_planner_ros.shortcut import shortcut
-from wafer_planner_ros.timing import optimise, scaled_start, Timing, TimingProblem
-from wafer_planner_ros.verify import Verification, verify
+from wafer_planner_ros.roadmap.search import find_path
+from wafer_planner_ros.roadmap.shortcut import shortcut
+from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
+from wafer_planner_ros.trajectory.timing import optimise, scaled_start, Timing, TimingProblem
+from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
 

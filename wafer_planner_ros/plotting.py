@@ -16,7 +16,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from wafer_planner_ros.roadmap import SAMPLER_NAMES  # noqa: E402
+from wafer_planner_ros.roadmap.graph import SAMPLER_NAMES  # noqa: E402
 
 _SAMPLER_COLOURS = ('tab:blue', 'tab:orange', 'tab:green')
 _ANGLES = np.linspace(0.0, 2.0 * np.pi, 64)

@@ -6,12 +6,12 @@ import logging
 import os
 import sys
 
-from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
-from wafer_planner_ros.cell import Cell, default_cell_path
+from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError, WaferPlannerError
 from wafer_planner_ros.recording.queries import queries
 from wafer_planner_ros.recording.reading import read
-from wafer_planner_ros.roadmap import check_seed, RoadmapSettings
+from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
+from wafer_planner_ros.roadmap.graph import check_seed, RoadmapSettings
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 

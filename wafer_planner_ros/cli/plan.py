@@ -4,29 +4,21 @@ import argparse
 from pathlib import Path
 import sys
 
+from wafer_planner_ros.cell.model import station_pairs
 from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_FAILURE, EXIT_OK
 from wafer_planner_ros.cli.common import load_cell, roadmap_for, run, UsageError, write_json
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import error_json, plan_json, roadmap_json
+from wafer_planner_ros.service.requests import end_of_text
 
 
 def parse_end(text: str):
-    """Return a station name, or a list of floats for 'q1,q2,q3'."""
-    if ',' not in text:
-        return text
+    """Return a station name, or a list of floats for 'q1,q2,q3'; UsageError otherwise."""
     try:
-        return [float(v) for v in text.split(',')]
-    except ValueError:
-        raise UsageError(f'{text!r} is neither a station name nor comma-separated '
-                         'joint angles') from None
-
-
-def station_pairs(cell) -> list:
-    """Return every loadport->loadlock and loadlock->loadport pair."""
-    ports = sorted(n for n, s in cell.stations.items() if s.role == 'loadport')
-    locks = sorted(n for n, s in cell.stations.items() if s.role == 'loadlock')
-    return [(p, lk) for p in ports for lk in locks] + [(lk, p) for p in ports for lk in locks]
+        return end_of_text(text)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def plan_one(planner, start, goal, info, joint_names) -> tuple:

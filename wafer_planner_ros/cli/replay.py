@@ -13,16 +13,16 @@ import argparse
 import sys
 from typing import Optional, Tuple
 
-from wafer_planner_ros.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.cli.common import (EXIT_FAILURE, EXIT_OK, Progress, recorded_queries,
                                           run, UsageError, write_json)
 from wafer_planner_ros.errors import CellError, PlanningError
-from wafer_planner_ros.node.requests import request_of, RequestError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.compare import (DEFAULT_TOLERANCE, judge, OK, row_for,
                                                  summary, table)
 from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query
-from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.service.requests import request_of, RequestError
 
 
 class Replayer:

@@ -19,13 +19,13 @@ import sys
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-from wafer_planner_ros.cell import Cell
+from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, recorded_queries, run
 from wafer_planner_ros.cli.common import UsageError
 from wafer_planner_ros.errors import CellError
-from wafer_planner_ros.node.requests import end_label, request_of, RequestError
 from wafer_planner_ros.plotting import plot_ends, plot_motion
 from wafer_planner_ros.recording.queries import label_configuration, Query, short_label
+from wafer_planner_ros.service.requests import end_label, request_of, RequestError
 
 INDEX = 'index.html'
 DEFAULT_DPI = 80

@@ -21,9 +21,8 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from wafer_planner_ros.cli.common import UsageError
-from wafer_planner_ros.cli.plan import parse_end
 from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.service.requests import end_of_text
 
 
 def main(argv=None) -> int:
@@ -39,8 +38,8 @@ def main(argv=None) -> int:
                         help='the planner node (default: /wafer_planner)')
     args = parser.parse_args(argv)
     try:
-        ends = [parse_end(args.start), parse_end(args.goal)]
-    except UsageError as exc:
+        ends = [end_of_text(args.start), end_of_text(args.goal)]
+    except ValueError as exc:
         parser.error(str(exc))
     request_id = args.id or f'client-{os.getpid()}-{int(time.time() * 1000)}'
     rclpy.init()

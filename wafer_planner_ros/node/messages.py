@@ -5,8 +5,8 @@ from typing import Mapping, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from wafer_planner_ros.node import cdr
-from wafer_planner_ros.node.requests import end_label
+from wafer_planner_ros.service import cdr
+from wafer_planner_ros.service.requests import end_label
 
 LEVELS = {'ok': ord(DiagnosticStatus.OK), 'warn': ord(DiagnosticStatus.WARN),
           'error': ord(DiagnosticStatus.ERROR)}

@@ -39,10 +39,10 @@ from visualization_msgs.msg import MarkerArray
 from wafer_planner_ros.errors import ErrorCode
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.recording import NodeRecording
-from wafer_planner_ros.node.requests import request_id_of, request_of, RequestError
-from wafer_planner_ros.node.settings import check, PARAMETERS, settings_from
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
+from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
+from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
 
 # Requests and answers: reliable and keep-all, so that a burst is delivered whole (a
 # keep-last reader cache drops the oldest samples of a burst longer than its depth).

@@ -22,16 +22,16 @@ from typing import Callable, Optional
 
 from rclpy.serialization import serialize_message
 
-from wafer_planner_ros.cache import CachedRoadmap, load_or_build
-from wafer_planner_ros.cell import Cell
-from wafer_planner_ros.cell_file import read_cell_file
+from wafer_planner_ros.cell.document import read_cell_file
+from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
 from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.settings import NodeSettings
 from wafer_planner_ros.planner import Planner, PlannerSettings
-from wafer_planner_ros.roadmap import RoadmapSettings
+from wafer_planner_ros.roadmap.cache import CachedRoadmap, load_or_build
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.service.settings import NodeSettings
 
 PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but

@@ -16,7 +16,7 @@ from typing import Dict, List, Mapping, Optional, Tuple
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 
-from wafer_planner_ros.cell import Cell
+from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.recording.contents import (CELL_ATTACHMENT, LOAD_METADATA,
                                                   PARAMETERS_ATTACHMENT, read_parameters)
 from wafer_planner_ros.recording.reading import Recording

@@ -44,10 +44,10 @@ from numba import njit
 import numpy as np
 from scipy.optimize import minimize
 
-from wafer_planner_ros.bspline import CubicBSpline, DEGREE, derivative_points
-from wafer_planner_ros.bspline import knots_from_intervals, padded_windows, WINDOW
-from wafer_planner_ros.bspline import window_states
-from wafer_planner_ros.kinematics import wafer_acceleration_point
+from wafer_planner_ros.geometry.kinematics import wafer_acceleration_point
+from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, derivative_points
+from wafer_planner_ros.trajectory.bspline import knots_from_intervals, padded_windows, WINDOW
+from wafer_planner_ros.trajectory.bspline import window_states
 
 logger = logging.getLogger(__name__)
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from numba import njit
 import numpy as np
 
-from wafer_planner_ros.geometry import point_segment_distance
-from wafer_planner_ros.kinematics import PlanarArm
+from wafer_planner_ros.geometry.kinematics import PlanarArm
+from wafer_planner_ros.geometry.planar import point_segment_distance
 
 
 @dataclass(frozen=True)

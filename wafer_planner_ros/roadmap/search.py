@@ -7,7 +7,7 @@ from numba import njit
 import numpy as np
 from scipy.sparse import csr_matrix
 
-from wafer_planner_ros.certify import certify_segments
+from wafer_planner_ros.geometry.certify import certify_segments
 
 
 def astar(graph: csr_matrix, coords: np.ndarray, start: int, goal: int,

@@ -25,8 +25,8 @@ from typing import Optional
 import numpy as np
 
 from wafer_planner_ros import __version__
-from wafer_planner_ros.prm import build_roadmap
-from wafer_planner_ros.roadmap import Roadmap, RoadmapSettings
+from wafer_planner_ros.roadmap.builder import build_roadmap
+from wafer_planner_ros.roadmap.graph import Roadmap, RoadmapSettings
 
 logger = logging.getLogger(__name__)
 

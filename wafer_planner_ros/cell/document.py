@@ -29,7 +29,7 @@ import re
 import stat
 from typing import Optional, Union
 
-from wafer_planner_ros import schema
+from wafer_planner_ros.cell import schema
 from wafer_planner_ros.errors import CellError
 import yaml
 from yaml.events import AliasEvent, DocumentStartEvent, MappingStartEvent, ScalarEvent

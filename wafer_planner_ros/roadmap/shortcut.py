@@ -10,7 +10,7 @@ order).
 
 import numpy as np
 
-from wafer_planner_ros.certify import certify_segments
+from wafer_planner_ros.geometry.certify import certify_segments
 
 
 def shortcut(path: np.ndarray, model, lipschitz: np.ndarray) -> np.ndarray:

@@ -310,3 +310,18 @@ def _joints(robot_joints: Sequence[str]) -> str:
 
 def _digits(value: int) -> int:
     return int(abs(value).bit_length() * math.log10(2)) + 1
+
+
+def end_of_text(text: str) -> Union[str, list]:
+    """
+    Return a start or goal as a person types it: a station name, or 'q1,q2,q3' as floats.
+
+    Raise ValueError, with a sentence naming the text, when it is neither.
+    """
+    if ',' not in text:
+        return text
+    try:
+        return [float(v) for v in text.split(',')]
+    except ValueError:
+        raise ValueError(f'{quote(text)} is neither a station name nor comma-separated '
+                         'joint angles') from None

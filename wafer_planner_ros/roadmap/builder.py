@@ -14,10 +14,11 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from wafer_planner_ros import samplers
-from wafer_planner_ros.certify import certify_segments
 from wafer_planner_ros.errors import WaferPlannerError
-from wafer_planner_ros.roadmap import Roadmap, RoadmapSettings, SAMPLER_NAMES, STATION_SAMPLER
+from wafer_planner_ros.geometry.certify import certify_segments
+from wafer_planner_ros.roadmap import samplers
+from wafer_planner_ros.roadmap.graph import Roadmap, RoadmapSettings
+from wafer_planner_ros.roadmap.graph import SAMPLER_NAMES, STATION_SAMPLER
 
 logger = logging.getLogger(__name__)
 

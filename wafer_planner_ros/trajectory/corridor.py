@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wafer_planner_ros.lipschitz import body_box_half_widths, box_half_widths
+from wafer_planner_ros.geometry.lipschitz import body_box_half_widths, box_half_widths
 
 SAFETY = 0.999
 """Boxes are shrunk by this factor so that their corners are strictly inside the clearance."""

@@ -15,16 +15,16 @@ import sys
 from typing import Mapping, Optional, Tuple
 
 import numpy as np
-from wafer_planner_ros import schema
-from wafer_planner_ros.cell_file import read_cell_file, read_cell_yaml
-from wafer_planner_ros.clearance import ClearanceModel
+from wafer_planner_ros.cell import schema
+from wafer_planner_ros.cell.document import read_cell_file, read_cell_yaml
 from wafer_planner_ros.errors import CellError
-from wafer_planner_ros.geometry import points_in_polygon
-from wafer_planner_ros.kinematics import IkSolution, PlanarArm
-from wafer_planner_ros.lipschitz import body_constants
-from wafer_planner_ros.polygons import PolygonError, simple_polygon, touches_or_overlaps
+from wafer_planner_ros.geometry.clearance import ClearanceModel
+from wafer_planner_ros.geometry.kinematics import IkSolution, PlanarArm
+from wafer_planner_ros.geometry.lipschitz import body_constants
+from wafer_planner_ros.geometry.planar import points_in_polygon
+from wafer_planner_ros.geometry.polygons import PolygonError, simple_polygon, touches_or_overlaps
 
-_PACKAGE = Path(__file__).resolve().parent
+_PACKAGE = Path(__file__).resolve().parents[1]  # wafer_planner_ros/
 
 MAX_MOTION_TIME = 3600.0
 """s: a limit under which one motion across the cell would take longer is refused."""
@@ -192,7 +192,7 @@ class Cell:
 
     def fcl_model(self):
         """Return a new reference collision model on python-fcl (margin included)."""
-        from wafer_planner_ros.fcl_model import FclModel
+        from wafer_planner_ros.geometry.fcl_model import FclModel
         return FclModel(self.robot.arm, self.robot.collision_radii, self.boundary,
                         self.obstacles)
 
@@ -430,3 +430,10 @@ def _reach(robot: Robot, centre, heading, elbow, path) -> list:
             raise CellError(f'{path}.elbow',
                             f'branch {elbow} is outside robot.joint_limits.position')
     return solutions
+
+
+def station_pairs(cell) -> list:
+    """Return every loadport->loadlock and loadlock->loadport pair."""
+    ports = sorted(n for n, s in cell.stations.items() if s.role == 'loadport')
+    locks = sorted(n for n, s in cell.stations.items() if s.role == 'loadlock')
+    return [(p, lk) for p in ports for lk in locks] + [(lk, p) for p in ports for lk in locks]

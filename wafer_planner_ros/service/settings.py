@@ -11,10 +11,10 @@ import math
 from pathlib import Path
 from typing import Any, Mapping, NamedTuple, Optional, Tuple
 
-from wafer_planner_ros.cache import DEFAULT_CACHE_DIR
-from wafer_planner_ros.cell import default_cell_path
+from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.planner import SAMPLE_PERIOD_RANGE
-from wafer_planner_ros.roadmap import MAX_NODES, MAX_SEED
+from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR
+from wafer_planner_ros.roadmap.graph import MAX_NODES, MAX_SEED
 
 
 class Parameter(NamedTuple):

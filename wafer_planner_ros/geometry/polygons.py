@@ -20,7 +20,7 @@ from fractions import Fraction
 from numba import njit
 import numpy as np
 
-from wafer_planner_ros.predicates import is_safe, orient, orientation
+from wafer_planner_ros.geometry.predicates import is_safe, orient, orientation
 
 _NONE, _CROSS, _TOUCH, _OVERLAP = 0, 1, 2, 3
 

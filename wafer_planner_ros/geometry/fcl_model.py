@@ -18,7 +18,7 @@ slow (Python-side transforms per query) and serves as the ground truth that the 
 import fcl
 import numpy as np
 import shapely
-from wafer_planner_ros.geometry import cross2
+from wafer_planner_ros.geometry.planar import cross2
 
 _HALF_HEIGHT = 1.0  # m: prisms span z in [-1, 1]; the robot lies at z = 0
 _MARGIN = 2.0       # m: the box around the boundary whose remainder is the wall

@@ -1,0 +1,1 @@
+"""The work cell: its model and the reading and validation of the cell file."""

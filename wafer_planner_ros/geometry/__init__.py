@@ -1,0 +1,1 @@
+"""Planar geometry of the arm in its enclosure: polygons, kinematics, clearance, certificates."""

@@ -1,0 +1,1 @@
+"""The probabilistic roadmap: samplers, builder, graph, cache, search and shortcuts."""
