@@ -57,3 +57,20 @@ def harness(roadmap_cache, tmp_path_factory):
                        'recording.directory': str(tmp_path_factory.mktemp('recordings'))})
     yield running
     running.close()
+
+
+@pytest.fixture(autouse=True)
+def _parameters_restored(request):
+    """Put back, after each test on the shared node, every parameter the test changed."""
+    if 'harness' not in request.fixturenames:
+        yield
+        return
+    from rclpy.parameter import Parameter
+    from wafer_planner_ros.service.settings import PARAMETERS
+    node = request.getfixturevalue('harness').node
+    before = {p.name: node.get_parameter(p.name).value for p in PARAMETERS}
+    yield  # whether the test passed or failed: a failure must not spill into the next test
+    changed = [Parameter(name, value=value) for name, value in before.items()
+               if node.get_parameter(name).value != value]
+    if changed:
+        assert all(r.successful for r in node.set_parameters(changed))

@@ -52,15 +52,19 @@ def test_default_stations_reachable_on_both_branches_at_their_poses(default_cell
 
 
 def test_test_cells_cover_obstacles_and_irregular_boundaries(cell):
-    if cell.name == 'efem-pillar':
-        assert len(cell.obstacles) == 2
-        assert [len(c.configs) for c in cell.stations.values()].count(1) == 2  # elbow / joints
-    if cell.name == 'efem-notched':
-        assert np.any(cell.robot.base != 0.0)
-        start, middle, end = cell.boundary, np.roll(cell.boundary, -1, 0), np.roll(
-            cell.boundary, -2, 0)
-        turns = cross2(middle - start, end - middle)
-        assert np.any(turns < 0), 'the notched boundary must have a reflex corner'
+    start, middle, end = cell.boundary, np.roll(cell.boundary, -1, 0), np.roll(
+        cell.boundary, -2, 0)
+    reflex = bool(np.any(cross2(middle - start, end - middle) < 0))
+    single = [len(c.configs) for c in cell.stations.values()].count(1)  # elbow / joints
+    # Each cell is there for what it covers; a cell not listed here fails.
+    covers = {
+        'efem-3lp-2ll': (0, False, False, 0),  # the paper's: convex, empty, base at 0
+        'efem-pillar': (2, False, False, 2),   # obstacles, single-branch stations
+        'efem-notched': (0, True, True, 0),    # a reflex corner, the base off the origin
+    }
+    assert cell.name in covers
+    assert (len(cell.obstacles), reflex, bool(np.any(cell.robot.base != 0.0)), single) == \
+        covers[cell.name]
 
 
 def test_station_roles_follow_names(default_cell):

@@ -157,13 +157,15 @@ def test_late_subscriber_gets_the_roadmap_markers(harness, default_cell):
     assert all(m.header.frame_id == 'efem' for m in inbox[0].markers)
 
 
-def test_services_answer(harness, monkeypatch):
+def test_services_answer(harness, monkeypatch, default_roadmap):
     from wafer_planner_ros.node import worker
     status = harness.status()
     for key in ('ready', 'busy_with', 'cell', 'nodes', 'edges', 'hash', 'seed', 'queue',
                 'served', 'failed', 'last_error', 'rebuild_failed', 'last_rebuild_error'):
         assert key in status
-    assert status['ready'] and status['nodes'] == 1510 and status['edges'] == 40885
+    assert status['ready'] and status['hash'] == default_roadmap.digest
+    assert (status['nodes'], status['edges']) == (default_roadmap.node_count,
+                                                  default_roadmap.edge_count)
     assert not status['rebuild_failed'] and status['last_rebuild_error'] == ''
     release = threading.Event()
     load_or_build = worker.load_or_build

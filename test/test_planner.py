@@ -44,12 +44,10 @@ def test_every_station_pair_passes_the_independent_check(cell, planner):
 
 
 def _every_combination(planner, start, goal):
-    """Return the optimised cycle time of every elbow-branch combination, none given up."""
-    a, b = planner.endpoint(start, 'start'), planner.endpoint(goal, 'goal')
-    stages = dict.fromkeys(STAGES, 0.0)
-    return [planner._timed(planner._prepared(a, b, qa, qb, (ea, eb), stages), None,
-                           stages).cycle_time
-            for ea, qa in a.configs for eb, qb in b.configs]
+    """Return the cycle time of every elbow-branch combination, each planned on its own."""
+    return [planner.plan(start, goal, branches=(ea, eb)).cycle_time
+            for ea, _ in planner.endpoint(start, 'start').configs
+            for eb, _ in planner.endpoint(goal, 'goal').configs]
 
 
 @pytest.mark.slow
@@ -168,3 +166,12 @@ def test_verification_fails_a_curve_that_is_not_finite_inside(default_cell, defa
     assert 'the position is not finite everywhere' in checked.problems
     assert any(p.startswith('collision') for p in checked.problems)
     assert verify(result.spline, default_cell, result.start_q, result.goal_q).ok
+
+
+def test_one_branch_combination_can_be_asked_for(default_cell, default_roadmap):
+    planner = Planner(default_cell, default_roadmap)
+    result = planner.plan('loadport1', 'loadlock1', branches=(1, -1))
+    assert result.branches == (1, -1) and result.metrics['candidates'] == 1
+    with pytest.raises(PlanningError) as info:
+        planner.plan('loadport1', 'loadlock1', branches=(2, 1))
+    assert info.value.code is ErrorCode.INVALID_REQUEST and 'no elbow branch 2' in str(info.value)

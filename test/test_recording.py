@@ -1,4 +1,9 @@
-"""The recording core without ROS: layout, definitions, failures, cut files and recovery."""
+"""
+The recording core: layout, definitions, failures, cut files and recovery.
+
+The recorder itself is ROS-free; these tests use rclpy's serialiser and message classes only
+to make real CDR bytes to record, and ``rosbags`` to read them back independently.
+"""
 
 import errno
 import io

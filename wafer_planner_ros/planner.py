@@ -164,15 +164,21 @@ class Planner:
                                       f'({contact.describe()})')
         return Endpoint(','.join(f'{v:g}' for v in q), ((None, q),))
 
-    def plan(self, start, goal, deadline: Optional[float] = None) -> PlanResult:
+    def plan(self, start, goal, deadline: Optional[float] = None,
+             branches: Optional[Tuple[Optional[int], Optional[int]]] = None) -> PlanResult:
         """
         Return the verified trajectory from start to goal with the shortest cycle time.
 
         ``deadline``: a ``time.monotonic()`` instant after which the request gives up with
-        TIMEOUT. Raises PlanningError with the code of the first reason it cannot answer.
+        TIMEOUT. ``branches``: plan only this (start, goal) elbow-branch combination (None
+        for joint angles), e.g. to see what each one costs. Raises PlanningError with the
+        code of the first reason it cannot answer.
         """
         begun = time.perf_counter()
         a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
+        if branches is not None:
+            a, b = (_only_branch(end, elbow, role) for end, elbow, role in
+                    ((a, branches[0], 'start'), (b, branches[1], 'goal')))
         stage_ms = dict.fromkeys(STAGES, 0.0)
         prepared, failure = [], None
         for elbow_a, qa in a.configs:
@@ -328,6 +334,16 @@ class _Clock:
         now = time.perf_counter()
         self.totals[stage] += (now - self.last) * 1000.0
         self.last = now
+
+
+def _only_branch(end: Endpoint, elbow, role: str) -> Endpoint:
+    """Return ``end`` with only its configuration on the ``elbow`` branch."""
+    configs = tuple(c for c in end.configs if c[0] == elbow)
+    if not configs:
+        raise PlanningError(ErrorCode.INVALID_REQUEST,
+                            f'{role} {end.label} has no elbow branch {elbow!r} (it has '
+                            f'{[c[0] for c in end.configs]})')
+    return replace(end, configs=configs)
 
 
 def _check_deadline(deadline: Optional[float]) -> None:

@@ -7,16 +7,13 @@ with its joint and wafer profiles against the limits (Figs. 10-13).
 
 import textwrap
 
-import matplotlib
+from matplotlib import colormaps
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+import numpy as np
 
-matplotlib.use('Agg')
-
-from matplotlib.collections import LineCollection  # noqa: E402, I100 - backend first
-from matplotlib.lines import Line2D  # noqa: E402
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from wafer_planner_ros.roadmap.graph import SAMPLER_NAMES  # noqa: E402
+from wafer_planner_ros.roadmap.graph import SAMPLER_NAMES
 
 _SAMPLER_COLOURS = ('tab:blue', 'tab:orange', 'tab:green')
 _ANGLES = np.linspace(0.0, 2.0 * np.pi, 64)
@@ -70,10 +67,10 @@ def draw_robots(ax, robot, configurations, colours, alpha=1.0, wafer=True) -> No
 
 def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> None:
     """Write a PNG: the cell with the robot at every station, and the roadmap in joint space."""
-    fig = plt.figure(figsize=(15, 6.5))
+    fig = Figure(figsize=(15, 6.5))
     ax = fig.add_subplot(1, 2, 1)
     draw_cell(ax, cell)
-    colours = plt.get_cmap('tab10')
+    colours = colormaps['tab10']
     for i, (name, station) in enumerate(sorted(cell.stations.items())):
         for config in station.configs:
             draw_robot(ax, cell.robot, config.q, colour=colours(i % 10), alpha=0.8)
@@ -100,7 +97,6 @@ def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> N
     ax3.legend(loc='upper left', fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_trajectory(cell, result, path, outlines: int = 14) -> None:
@@ -127,7 +123,7 @@ def plot_motion(cell, times, q, qd, qdd, title: str, path, outlines: int = 14,
     robot = cell.robot
     times = np.asarray(times, float)
     q, qd, qdd = (np.asarray(values, float) for values in (q, qd, qdd))
-    fig = plt.figure(figsize=(16, 9))
+    fig = Figure(figsize=(16, 9))
     grid = fig.add_gridspec(3, 3, left=0.05, right=0.985, bottom=0.06, top=0.93,
                             hspace=0.32, wspace=0.2)
     ax = fig.add_subplot(grid[:2, :2])
@@ -137,7 +133,6 @@ def plot_motion(cell, times, q, qd, qdd, title: str, path, outlines: int = 14,
     _draw_wafer(fig.add_subplot(grid[2, :2]), robot, times,
                 robot.arm.wafer_acceleration(q, qd, qdd))
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
 
 
 def plot_ends(cell, start, goal, title: str, path, dpi: int = 100) -> None:
@@ -147,7 +142,7 @@ def plot_ends(cell, start, goal, title: str, path, dpi: int = 100) -> None:
     For a query that has no motion (a refused request); ``title`` (shown as it is, its lines
     wrapped) says why. The stations are marked at their wafer centres.
     """
-    fig = plt.figure(figsize=(11, 7))
+    fig = Figure(figsize=(11, 7))
     ax = fig.add_axes((0.08, 0.08, 0.9, 0.78))
     draw_cell(ax, cell)
     for name, station in sorted(cell.stations.items()):
@@ -167,13 +162,12 @@ def plot_ends(cell, start, goal, title: str, path, dpi: int = 100) -> None:
     ax.legend(handles=handles, loc='upper right')
     fig.suptitle(_wrapped(title, 110), parse_math=False, fontsize=11)
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
 
 
 def _draw_motion(ax, cell, times, q, outlines: int) -> None:
     robot = cell.robot
     draw_cell(ax, cell)
-    colours = plt.get_cmap('viridis')
+    colours = colormaps['viridis']
     instants = np.linspace(times[0], times[-1], outlines)
     shown = np.column_stack([np.interp(instants, times, q[:, j]) for j in range(q.shape[1])])
     draw_robots(ax, robot, shown, colours(np.linspace(0.0, 1.0, outlines)), alpha=0.55)

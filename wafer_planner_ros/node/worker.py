@@ -62,7 +62,12 @@ class PlanningWorker:
         self._settings, self._recording, self._send = settings, recording, send
         self._logger, self._stamp = SafeLogger(logger), stamp
         self.lock = threading.Condition()
-        """Guards everything below; ``notify_all`` wakes the threads."""
+        """
+        Guards the backlog, the roadmaps, the load state and the counts; wakes the threads.
+
+        ``cell`` and ``answer_error`` read ``_serving`` without it: one reference, replaced
+        whole under the lock, so a read sees the old roadmap or the new one, never half.
+        """
         self._backlog = deque()
         """(number, request, received monotonic, received ns) of the waiting requests."""
         self._serving: Optional[Serving] = None

@@ -70,7 +70,13 @@ class Recorder:
         """Held while the writer is used."""
         self._queue = deque()
         self._wake = threading.Condition()
-        """Guards the queue, the flags and the counters."""
+        """
+        Guards the queue, ``_sync_wanted``, ``_closing``, ``error`` and the counters.
+
+        ``_sync_began`` is written by the thread alone and read without it by ``stalled``
+        (one float: a stale read only delays the verdict by a write); ``error`` is also
+        read without it as a first test (it only ever goes from '' to a message, once).
+        """
         self._sync_wanted = False
         self._sync_began: Optional[float] = None
         self._closing = False
