@@ -9,8 +9,13 @@ from scipy.interpolate import BSpline
 from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.corridor import build_corridor
-from wafer_planner_ros.trajectory.timing import MARGIN, optimise, TimingProblem
+from wafer_planner_ros.trajectory.timing import optimise
+from wafer_planner_ros.trajectory.timing_problem import TimingProblem
+from wafer_planner_ros.trajectory.tuning import TimingSettings
 from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times
+
+MARGIN = TimingSettings().margin
+"""The optimiser's tightening of the limits (its default tuning)."""
 
 
 @pytest.fixture()

@@ -22,7 +22,9 @@ from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
-from wafer_planner_ros.trajectory.timing import optimise, scaled_start, Timing, TimingProblem
+from wafer_planner_ros.trajectory.timing import optimise
+from wafer_planner_ros.trajectory.timing_problem import scaled_start, Timing, TimingProblem
+from wafer_planner_ros.trajectory.tuning import TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
@@ -49,6 +51,8 @@ class PlannerSettings:
     """Size the safe boxes per body (beyond the paper; False: Eq. 3)."""
     extra_points: int = 1
     """Control points added on every straight stretch (beyond the paper)."""
+    timing: TimingSettings = TimingSettings()
+    """The time optimiser's tuning."""
 
     def __post_init__(self):
         """Reject unusable settings."""
@@ -243,7 +247,7 @@ class Planner:
                                   per_body=self.settings.per_body_boxes,
                                   extra=self.settings.extra_points)
         clock.lap('corridor')
-        problem = TimingProblem(corridor.control_points, self.cell.robot)
+        problem = TimingProblem(corridor.control_points, self.cell.robot, self.settings.timing)
         start = scaled_start(problem)
         clock.lap('spline')
         return _Prepared(a, b, qa, qb, branches, roadmap_path, path, corridor.control_points,

@@ -1,0 +1,190 @@
+"""
+The knot-interval optimisation problem of one curve (paper sections 4.3 and 5).
+
+Variables: the durations h of the spline's spans. Objective: the total time sum(h)
+(Eq. 11). Constraints, all as ``1 - (x / (margin * limit))**2 >= 0``: the joint velocity,
+acceleration (and jerk) control points (Eq. 6-8), and the wafer-centre acceleration on x
+and y (and |a|) at constraint samples (Eq. 9). ``Timing`` is what the optimiser returns.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, derivative_points
+from wafer_planner_ros.trajectory.bspline import knots_from_intervals, padded_windows, WINDOW
+from wafer_planner_ros.trajectory.timing_rows import control_rows, wafer_rows
+from wafer_planner_ros.trajectory.tuning import TimingSettings
+
+
+@dataclass(frozen=True, eq=False)
+class Timing:
+    """The outcome of the time optimisation."""
+
+    intervals: np.ndarray
+    """Span durations (s) of the returned trajectory."""
+    initial_intervals: np.ndarray
+    """The λ-scaled start point (s)."""
+    scale: float
+    """λ of Eq. 12."""
+    optimised: bool
+    """False when the λ-scaled timing is returned instead (see ``message``)."""
+    iterations: int
+    """Solver iterations over all rounds."""
+    rounds: int
+    samples: int
+    """Wafer-acceleration constraint samples in the last round."""
+    message: str = ''
+
+
+@dataclass(frozen=True, eq=False)
+class Samples:
+    """Instants where the wafer acceleration is constrained: fractions of spans."""
+
+    span: np.ndarray
+    fraction: np.ndarray
+
+    def __len__(self) -> int:
+        """Return the number of samples."""
+        return len(self.span)
+
+
+class TimingProblem:
+    """The knot-interval optimisation of one set of control points."""
+
+    def __init__(self, control_points: np.ndarray, robot,
+                 settings: TimingSettings = TimingSettings()):
+        """Set up the problem for control points (n + 1, 3) of a cell's robot."""
+        self.settings = settings
+        self.points = np.asarray(control_points, float)
+        self.spans = len(self.points) - DEGREE
+        self.arm = robot.arm
+        self.limits = robot.limits
+        self.wafer = robot.wafer_acceleration_limit
+        self.wafer_norm = robot.wafer_acceleration_norm_limit
+        # Velocity, acceleration (, jerk) limits and x, y, |a| wafer limits with the margin
+        # (0: no |a| limit).
+        orders = [self.limits.velocity, self.limits.acceleration]
+        if self.limits.jerk is not None:
+            orders.append(self.limits.jerk)
+        self._control_limits = settings.margin * np.array(orders, float)
+        self._wafer_limits = settings.margin * np.array([self.wafer[0], self.wafer[1],
+                                                         self.wafer_norm or 0.0])
+
+    def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
+        """Return the samples at ``fraction`` (0..1) of the given spans."""
+        return Samples(span=np.asarray(span, np.int64), fraction=np.asarray(fraction, float))
+
+    def derivatives(self, intervals) -> tuple:
+        """
+        Return (knots, [velocity, acceleration (, jerk)] control points) of a timing.
+
+        Jerk control points come when the cell limits jerk.
+        """
+        knots = knots_from_intervals(np.ascontiguousarray(intervals, float))
+        out = [derivative_points(self.points, knots, DEGREE)]
+        out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
+        if self.limits.jerk is not None:
+            out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
+        return knots, out
+
+    def control_constraints(self, intervals) -> np.ndarray:
+        """Return the control-point constraints g >= 0, velocity then acceleration (, jerk)."""
+        return control_rows(np.ascontiguousarray(intervals, float), self.points,
+                            self._control_limits, False)[0]
+
+    def wafer_constraints(self, intervals: np.ndarray, samples: Samples) -> np.ndarray:
+        """Return the wafer constraints g >= 0 at the samples: x, y (, |a|), (c * K,)."""
+        return self._wafer(intervals, samples, False)[0]
+
+    def constraints(self, intervals, samples: Samples, rows=None) -> np.ndarray:
+        """
+        Return the constraint values g >= 0 with the margin.
+
+        ``rows`` selects control-point constraints (a mask over ``control_constraints``);
+        the wafer-acceleration constraints at the samples follow.
+        """
+        control = self.control_constraints(intervals)
+        return np.concatenate([control if rows is None else control[rows],
+                               self.wafer_constraints(intervals, samples)])
+
+    def linearise(self, intervals: np.ndarray, samples: Samples, rows=None) -> tuple:
+        """Return the constraint values and their exact Jacobian (rows, m)."""
+        intervals = np.ascontiguousarray(intervals, float)
+        control, control_jacobian = control_rows(intervals, self.points,
+                                                 self._control_limits, True)
+        if rows is not None:
+            control, control_jacobian = control[rows], control_jacobian[rows]
+        values, jacobian = self._wafer(intervals, samples, True)
+        return (np.concatenate([control, values]), np.vstack([control_jacobian, jacobian]))
+
+    def _wafer(self, intervals: np.ndarray, samples: Samples, gradients: bool) -> tuple:
+        """Return the wafer constraint values (c * K,) and, if asked, their Jacobian."""
+        padded, windows = padded_windows(np.asarray(intervals, float), samples.span)
+        values, local = wafer_rows(padded, windows, self.points, samples.span,
+                                   samples.fraction, self.arm.link_lengths,
+                                   self._wafer_limits, gradients)
+        parts = len(values)
+        if not gradients:
+            return values.ravel(), None
+        # Each row has derivatives by h_{s-2}..h_{s+2}; those by the zero lengths beyond
+        # the ends fall in the padding and are dropped.
+        dense = np.zeros((parts * len(samples), len(padded)))
+        np.put_along_axis(dense, np.tile(windows[:, 1:WINDOW - 1], (parts, 1)),
+                          local.reshape(parts * len(samples), WINDOW - 2), axis=1)
+        return values.ravel(), dense[:, DEGREE:-DEGREE]
+
+    def dense_wafer_ratio(self, intervals: np.ndarray) -> tuple:
+        """Return (ratio, span, fraction): the worst of x, y, |a| at every dense step."""
+        span, fraction = dense_grid(intervals, self.settings.dense_step)
+        spline = CubicBSpline.from_intervals(self.points, intervals)
+        t = spline.knots[span + DEGREE] + intervals[span] * fraction
+        ax, ay = self.arm.wafer_acceleration_xy(*spline.evaluate_orders(t))
+        ratio = np.maximum(np.abs(ax) / self.wafer[0], np.abs(ay) / self.wafer[1])
+        if self.wafer_norm is not None:
+            ratio = np.maximum(ratio, np.hypot(ax, ay) / self.wafer_norm)
+        return ratio, span, fraction
+
+    def scale_factor(self, intervals: np.ndarray, wafer_ratio=None) -> float:
+        """
+        Return λ of Eq. 12 for a timing (wafer acceleration from the dense grid).
+
+        ``wafer_ratio``: the largest ``dense_wafer_ratio`` if the caller already has it.
+        """
+        ratios = [1.0]
+        for order, (points, limit) in enumerate(zip(self.derivatives(intervals)[1],
+                                                    self._control_limits)):
+            peak = float(np.max(np.abs(points) / limit, initial=0.0))
+            ratios.append(peak ** (1.0 / (order + 1)))  # speed scales 1/λ, accel 1/λ², ...
+        if wafer_ratio is None:
+            wafer_ratio = self.dense_wafer_ratio(intervals)[0].max()
+        ratios.append(np.sqrt(float(wafer_ratio) / self.settings.margin))
+        return max(ratios)
+
+
+def dense_grid(intervals: np.ndarray, step: float) -> tuple:
+    """Return (span, fraction) of times at most ``step`` apart, including every knot."""
+    counts = np.maximum(np.ceil(intervals / step).astype(int), 1)
+    span = np.repeat(np.arange(len(intervals)), counts)
+    fraction = (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)) \
+        / np.repeat(counts, counts)
+    return np.append(span, len(intervals) - 1), np.append(fraction, 1.0)
+
+
+def initial_intervals(problem: TimingProblem) -> np.ndarray:
+    """
+    Return the uniform timing of the paper's start point, before λ-scaling.
+
+    The total is the straight-line time of the slowest joint, max_j |qG - qI|_j / LV_j (the
+    paper prints min_j, which is zero when a joint does not move); at least 0.01 s.
+    """
+    travel = np.abs(problem.points[-1] - problem.points[0]) / problem.limits.velocity
+    total = max(float(travel.max()), 0.01)
+    return np.full(problem.spans, total / problem.spans)
+
+
+def scaled_start(problem: TimingProblem) -> tuple:
+    """Return the paper's feasible start point (Eq. 12): (intervals, λ)."""
+    uniform = initial_intervals(problem)
+    scale = problem.scale_factor(uniform)
+    return scale * uniform, scale
