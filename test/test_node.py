@@ -471,6 +471,7 @@ def _json(data) -> str:
 def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp_path):
     from rclpy.parameter import Parameter
     from wafer_planner_ros.node.planner_node import WaferPlannerNode
+    from wafer_planner_ros.node.worker import Sent
     context = rclpy.Context()
     rclpy.init(context=context)
     missing = tmp_path / 'missing.yaml'
@@ -488,7 +489,7 @@ def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp
             String(data='{"id": "n1", "from": "loadport1", "to": "loadlock1"}')), {})
         (kind, data, number), = answers
         result = deserialize_message(data, DiagnosticStatus)
-        assert kind == 'result' and result.name == 'n1' and number == 1
+        assert kind is Sent.RESULT and result.name == 'n1' and number == 1
         assert values(result)['code'] == 'ROADMAP_NOT_READY' and str(missing) in result.message
     finally:
         node.destroy_node()

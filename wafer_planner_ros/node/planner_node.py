@@ -39,7 +39,7 @@ from visualization_msgs.msg import MarkerArray
 from wafer_planner_ros.errors import ErrorCode
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.recording import NodeRecording
-from wafer_planner_ros.node.worker import PlanningWorker
+from wafer_planner_ros.node.worker import PlanningWorker, Sent
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
@@ -186,15 +186,16 @@ class WaferPlannerNode(Node):
             try:
                 self._deliver_one(kind, msg, number)
             except Exception as exc:  # noqa: B902 - the next answers still go out
-                self.log.error(f'query {number}: {kind} not published: {reason_of(exc)}')
+                self.log.error(f'query {number}: {kind.name.lower()} not published: '
+                               f'{reason_of(exc)}')
 
-    def _deliver_one(self, kind: str, msg, number: int) -> None:
-        if kind in ('answer', 'result'):
+    def _deliver_one(self, kind: Sent, msg, number: int) -> None:
+        if kind in (Sent.ANSWER, Sent.RESULT):
             # An answer is recorded, and safe from a crash, before it goes out. The
             # trajectory before its result: a client holding the result can rely on the
             # trajectory having been sent.
             out = ((self._trajectory_pub, msg[0]), (self._result_pub, msg[1])) \
-                if kind == 'answer' else ((self._result_pub, msg),)
+                if kind is Sent.ANSWER else ((self._result_pub, msg),)
             try:
                 recorded = self._recording.answer(number, [(p.topic_name, data)
                                                            for p, data in out])
@@ -206,7 +207,7 @@ class WaferPlannerNode(Node):
             for publisher, data in out:
                 publisher.publish(data)
         else:
-            (self._roadmap_pub if kind == 'markers' else self._path_pub).publish(msg)
+            (self._roadmap_pub if kind is Sent.MARKERS else self._path_pub).publish(msg)
 
     # ----------------------------------------------------------------- services, health
 

@@ -15,6 +15,7 @@ happens: a failure of the node itself is answered ``INTERNAL`` with the reason.
 
 from collections import deque
 from dataclasses import dataclass
+import enum
 import gc
 import threading
 import time
@@ -36,6 +37,19 @@ from wafer_planner_ros.service.settings import NodeSettings
 PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
+
+
+class Sent(enum.Enum):
+    """What the worker hands the executor to publish: (kind, message, query number)."""
+
+    ANSWER = enum.auto()
+    """(trajectory, result): recorded together, then published in that order."""
+    RESULT = enum.auto()
+    """An error's result alone."""
+    MARKERS = enum.auto()
+    """The roadmap markers of a load (query number 0)."""
+    PATH = enum.auto()
+    """The path markers of an answer."""
 
 
 @dataclass(frozen=True)
@@ -171,7 +185,7 @@ class PlanningWorker:
         with self.lock:
             self.counts['failed'] += 1
             self.last_error = f'{request_id}: {code.value}: {message}'
-        self._send(('result', status, number))
+        self._send((Sent.RESULT, status, number))
 
     def answer_internal(self, number, request_id, exc: BaseException, doing: str,
                         start=None, goal=None, planning_ms=None, roadmap=None) -> None:
@@ -305,7 +319,7 @@ class PlanningWorker:
                                  None if begun is None else (time.monotonic() - begun) * 1e3,
                                  roadmap)
             return
-        self._send(('answer', answer, number))
+        self._send((Sent.ANSWER, answer, number))
         with self.lock:
             self.counts['served'] += 1
         try:
@@ -313,7 +327,7 @@ class PlanningWorker:
         except Exception as exc:  # noqa: B902 - answered already: only the picture is lost
             self._logger.error(f'request {request.request_id}: no path markers: {reason_of(exc)}')
             return
-        self._send(('path', path, number))
+        self._send((Sent.PATH, path, number))
 
     # ----------------------------------------------------------------- loading
 
@@ -381,7 +395,7 @@ class PlanningWorker:
         try:
             roadmap_markers = serialize_message(markers.roadmap_markers(
                 cell, roadmap, settings.frame_id, self._stamp()))
-            self._send(('markers', roadmap_markers, 0))
+            self._send((Sent.MARKERS, roadmap_markers, 0))
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')

@@ -27,6 +27,7 @@ did not reach the file because the recording had stopped, or failed while they w
 """
 
 from collections import deque
+import enum
 import logging
 from pathlib import Path
 import threading
@@ -44,6 +45,19 @@ STALL = 0.25
 
 Message = Tuple[str, bytes, int, int, int]
 """(topic, serialised bytes, log time ns, publish time ns, sequence)."""
+
+
+class _Item(enum.Enum):
+    """What the writer thread's queue holds: (kind, its arguments...)."""
+
+    MESSAGE = enum.auto()
+    """(topic, data, log time, publish time, sequence)."""
+    FLUSH = enum.auto()
+    """(an answer's, or not): a durability point."""
+    ATTACH = enum.auto()
+    """(name, data, log time, media type)."""
+    METADATA = enum.auto()
+    """(name, values)."""
 
 
 class _Deleted(OSError):
@@ -125,9 +139,9 @@ class Recorder:
                 self._want_sync()
             return True
         for message in messages:  # a stalled disk: the thread writes them when it can
-            self._put(('message', *message))
+            self._put((_Item.MESSAGE, *message))
         if flush:
-            self._put(('flush', True))
+            self._put((_Item.FLUSH, True))
         return False
 
     def stalled(self) -> bool:
@@ -140,20 +154,20 @@ class Recorder:
     def record(self, topic: str, data: bytes, log_time: int, publish_time: int,
                sequence: int = 0) -> None:
         """Queue one serialised message (times in ns since the epoch)."""
-        self._put(('message', topic, data, log_time, publish_time, sequence))
+        self._put((_Item.MESSAGE, topic, data, log_time, publish_time, sequence))
 
     def attach(self, name: str, data: bytes, log_time: int,
                media_type: str = 'application/yaml') -> None:
         """Queue an attachment."""
-        self._put(('attach', name, data, log_time, media_type))
+        self._put((_Item.ATTACH, name, data, log_time, media_type))
 
     def metadata(self, name: str, values: Mapping[str, str]) -> None:
         """Queue a metadata record."""
-        self._put(('metadata', name, dict(values)))
+        self._put((_Item.METADATA, name, dict(values)))
 
     def flush(self) -> None:
         """Queue a durability point: a flush, then a sync."""
-        self._put(('flush', False))
+        self._put((_Item.FLUSH, False))
 
     def close(self, timeout: float = 30.0) -> Optional[Path]:
         """
@@ -220,8 +234,8 @@ class Recorder:
 
     def _tally_dropped(self, items) -> None:
         """Count the messages and answers among queued ``items`` as dropped (``_wake`` held)."""
-        self.dropped += sum(1 for item in items if item[0] == 'message')
-        self.lost += sum(1 for item in items if item[0] == 'flush' and item[1])
+        self.dropped += sum(1 for item in items if item[0] is _Item.MESSAGE)
+        self.lost += sum(1 for item in items if item[0] is _Item.FLUSH and item[1])
 
     # -------------------------------------------------------------- the thread
 
@@ -259,13 +273,13 @@ class Recorder:
         try:
             for done, item in enumerate(items, 1):
                 kind = item[0]
-                if kind == 'message':
+                if kind is _Item.MESSAGE:
                     self._writer.write(*item[1:])
-                elif kind == 'flush':
+                elif kind is _Item.FLUSH:
                     self._writer.flush()
                     flushed = True
                     checked = self._confirm(items, checked, done)
-                elif kind == 'attach':
+                elif kind is _Item.ATTACH:
                     self._writer.attach(*item[1:])
                 else:
                     self._writer.metadata(*item[1:])
@@ -279,7 +293,8 @@ class Recorder:
     def _confirm(self, items, checked: int, done: int) -> int:
         """Count ``items[checked:done]`` written once the file is still there; return done."""
         self._check()
-        self._count_written(sum(1 for item in items[checked:done] if item[0] == 'message'))
+        self._count_written(sum(1 for item in items[checked:done]
+                                if item[0] is _Item.MESSAGE))
         return done
 
     def _fail(self, exc: BaseException) -> None:

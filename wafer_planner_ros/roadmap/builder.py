@@ -8,6 +8,7 @@ updates the weights. When the roadmap has its nodes, every station configuration
 and connected to its ``station_neighbors`` nearest nodes.
 """
 
+import enum
 import logging
 import time
 
@@ -21,6 +22,20 @@ from wafer_planner_ros.roadmap.graph import Roadmap, RoadmapSettings
 from wafer_planner_ros.roadmap.graph import SAMPLER_NAMES, STATION_SAMPLER
 
 logger = logging.getLogger(__name__)
+
+
+class Outcome(str, enum.Enum):
+    """What a new node did to the roadmap; the values name its count in the statistics."""
+
+    MERGE = 'merges'
+    """Joined two or more components."""
+    NEW_COMPONENT = 'new_components'
+    """Connected to nothing."""
+    COVERAGE = 'coverage'
+    """Joined one component, farther than the redundancy radius from its nodes."""
+    REDUNDANT = 'redundant'
+    """Joined one component within the redundancy radius."""
+
 
 BARREN_ROUNDS = 50
 """Rounds in a row without a single free sample after which the build gives up."""
@@ -93,7 +108,7 @@ class _Builder:
         for sampler_index, outcome in zip(which[order], outcomes):
             name = SAMPLER_NAMES[sampler_index]
             self.counts[name]['nodes'] += 1
-            self.counts[name][outcome] += 1
+            self.counts[name][outcome.value] += 1
             rewards[sampler_index] += _REWARD[outcome]
         self.weights = samplers.update_weights(self.weights, rewards, draws.astype(float))
         self.rounds += 1
@@ -145,13 +160,13 @@ class _Builder:
             for j in linked:
                 uf.union(first + row, int(j))
             if not roots:
-                outcomes.append('new_components')
+                outcomes.append(Outcome.NEW_COMPONENT)
             elif len(roots) > 1:
-                outcomes.append('merges')
+                outcomes.append(Outcome.MERGE)
             elif nearest_dist[row] > self.settings.redundancy_radius:
-                outcomes.append('coverage')
+                outcomes.append(Outcome.COVERAGE)
             else:
-                outcomes.append('redundant')
+                outcomes.append(Outcome.REDUNDANT)
         return outcomes
 
     def finish(self, cell, seed: int, started: float) -> Roadmap:
@@ -181,8 +196,10 @@ class _Builder:
                        stations=stations, seed=seed, settings=self.settings, stats=stats)
 
 
-_REWARD = {'merges': samplers.REWARD_MERGE, 'new_components': samplers.REWARD_NEW_COMPONENT,
-           'coverage': samplers.REWARD_COVERAGE, 'redundant': samplers.REWARD_REDUNDANT}
+_REWARD = {Outcome.MERGE: samplers.REWARD_MERGE,
+           Outcome.NEW_COMPONENT: samplers.REWARD_NEW_COMPONENT,
+           Outcome.COVERAGE: samplers.REWARD_COVERAGE,
+           Outcome.REDUNDANT: samplers.REWARD_REDUNDANT}
 
 
 def build_roadmap(cell, settings: RoadmapSettings = RoadmapSettings(), seed: int = 0,
