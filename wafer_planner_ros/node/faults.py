@@ -3,8 +3,11 @@ Failing safely in the node: a failure as a bounded sentence, and a logger that n
 
 Every request gets exactly one answer whatever goes wrong, so what reports a failure must
 not fail itself: an exception whose ``str`` raises, a reason of megabytes, a log line with a
-lone surrogate (rclpy refuses those) or a logger after shutdown.
+lone surrogate (rclpy refuses those) or a logger after shutdown; a service callback that
+fails answers so (``guarded_service``, for a node with a ``log``).
 """
+
+import functools
 
 REASON = 300
 """Most characters of a failure's reason in an answer or the status."""
@@ -57,3 +60,16 @@ def _loggable(text: str) -> str:
         return text
     except UnicodeEncodeError:
         return text.encode('utf-8', 'backslashreplace').decode('utf-8')
+
+
+def guarded_service(callback):
+    """Wrap a service callback: a failure is answered (success false, the reason), not raised."""
+    @functools.wraps(callback)
+    def guarded(node, request, response):
+        try:
+            return callback(node, request, response)
+        except Exception as exc:  # noqa: B902 - the node serves on
+            node.log.error(f'{callback.__name__}: internal error: {reason_of(exc)}')
+            response.success, response.message = False, f'internal error: {reason_of(exc)}'
+            return response
+    return guarded

@@ -13,7 +13,6 @@ answering it ends the node (a failure of the node's own is answered ``INTERNAL``
 """
 
 from collections import deque
-import functools
 import itertools
 import json
 import sys
@@ -37,7 +36,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.errors import ErrorCode
-from wafer_planner_ros.node.faults import reason_of, SafeLogger
+from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.worker import PlanningWorker, Sent
 from wafer_planner_ros.recording.bag import qos, Topic
@@ -53,19 +52,6 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 # The QoS profiles, as the recording's channel metadata states them.
 RELIABLE_OFFERED = qos(keep_all=True, depth=RELIABLE.depth)
 LATCHED_OFFERED = qos(depth=1, transient_local=True)
-
-
-def _service(callback):
-    """Answer a service call whose callback fails with the reason, not end the node."""
-    @functools.wraps(callback)
-    def guarded(node, request, response):
-        try:
-            return callback(node, request, response)
-        except Exception as exc:  # noqa: B902 - the node serves on
-            node.log.error(f'{callback.__name__}: internal error: {reason_of(exc)}')
-            response.success, response.message = False, f'internal error: {reason_of(exc)}'
-            return response
-    return guarded
 
 
 class WaferPlannerNode(Node):
@@ -216,13 +202,13 @@ class WaferPlannerNode(Node):
         return {**self._worker.status(), **self._recording.status(),
                 'answers_before_recorded': self._late_records}
 
-    @_service
+    @guarded_service
     def _on_get_status(self, request, response):
         response.success = True
         response.message = json.dumps(self.status())
         return response
 
-    @_service
+    @guarded_service
     def _on_rebuild(self, request, response):
         if not self._worker.rebuild():
             response.success = False
@@ -234,7 +220,7 @@ class WaferPlannerNode(Node):
                             '"load" until done, rebuild_failed if it failed)')
         return response
 
-    @_service
+    @guarded_service
     def _on_set_recording(self, request, response):
         if request.data:
             response.success = self._start_recording()

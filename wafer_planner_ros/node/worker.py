@@ -14,7 +14,6 @@ happens: a failure of the node itself is answered ``INTERNAL`` with the reason.
 """
 
 from collections import deque
-from dataclasses import dataclass
 import enum
 import gc
 import threading
@@ -29,8 +28,9 @@ from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
 from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
+from wafer_planner_ros.node.serving import progress_reporter, Serving, warm_up
 from wafer_planner_ros.planner import Planner, PlannerSettings
-from wafer_planner_ros.roadmap.cache import CachedRoadmap, load_or_build
+from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.settings import NodeSettings
 
@@ -50,15 +50,6 @@ class Sent(enum.Enum):
     """The roadmap markers of a load (query number 0)."""
     PATH = enum.auto()
     """The path markers of an answer."""
-
-
-@dataclass(frozen=True)
-class Serving:
-    """A loaded roadmap and its planner, and when it took over (``time.time_ns()``)."""
-
-    planner: Planner
-    cached: CachedRoadmap
-    loaded_ns: int
 
 
 class PlanningWorker:
@@ -359,7 +350,7 @@ class PlanningWorker:
             self._logger.info(f'cell {cell.name} from {settings.cell_file}; loading or '
                               f'building a roadmap of {settings.nodes} nodes')
             cached = load_or_build(cell, RoadmapSettings(nodes=settings.nodes), settings.seed,
-                                   settings.cache_dir, self._progress())
+                                   settings.cache_dir, progress_reporter(self._logger))
             planner = Planner(cell, cached.roadmap,
                               PlannerSettings(sample_period=settings.sample_period))
             warm_up(planner)
@@ -418,22 +409,3 @@ class PlanningWorker:
                 f'rebuild failed: {reason}; serving the previous roadmap '
                 f'{serving.cached.roadmap.digest[:12]}')
         self._logger.error(self.last_error)
-
-    def _progress(self):
-        logger, last = self._logger, [-1]
-
-        def report(done: int, total: int, edges: int) -> None:
-            tenth = 10 * done // max(total, 1)
-            if tenth != last[0]:
-                last[0] = tenth
-                logger.info(f'building roadmap: {done}/{total} nodes, {edges} edges')
-        return report
-
-
-def warm_up(planner) -> None:
-    """Plan once so that the compiled kernels are loaded before the first request."""
-    names = sorted(planner.cell.stations)
-    try:
-        planner.plan(names[0], names[-1])
-    except (PlanningError, IndexError):
-        pass  # a cell whose first and last stations cannot be joined still warms up
