@@ -30,6 +30,9 @@ run: $(STAMP)
 		--params-file config/wafer_planner.yaml $(RUN_ARGS)
 
 test: $(STAMP)
+	@# colcon copies the sources and never deletes a copy whose source has gone (a moved
+	@# module): start from fresh copies, so that no stale module can be imported.
+	rm -rf .colcon/build/wafer_planner_ros/build .colcon/install/wafer_planner_ros/lib
 	$(COLCON) build $(COLCON_PATHS)
 	$(COLCON) test $(COLCON_PATHS) --return-code-on-test-failure \
 		--event-handlers console_direct+ --pytest-args -p no:cacheprovider
