@@ -2,7 +2,6 @@
 
 import copy
 import os
-import time
 
 import pytest
 from wafer_planner_ros.cell import document as cell_file
@@ -51,9 +50,7 @@ def _laughs(levels=9, width=10, indent='') -> str:
 def test_alias_bomb_at_the_top_level_is_refused_at_once(libyaml):
     text = f'[{_laughs()}]\n'
     assert len(text) < 1000
-    start = time.perf_counter()
-    error = _refusal(text, libyaml)
-    assert time.perf_counter() - start < 2.0
+    error = _refusal(text, libyaml)  # counted, not expanded: bench/bench_cell.py times it
     assert error.path == 'cell.yaml'
     assert f'more than {cell_file.MAX_NODES:,} YAML nodes' in error.reason
 
@@ -62,9 +59,7 @@ def test_alias_bomb_at_the_top_level_is_refused_at_once(libyaml):
 def test_alias_bomb_in_the_cell_name_is_refused_at_once(default_text, libyaml):
     text = _edit(default_text, 'name: efem-3lp-2ll',
                  f'name: [{_laughs(indent="         ")}]')
-    start = time.perf_counter()
     error = _refusal(text, libyaml)
-    assert time.perf_counter() - start < 2.0
     assert f'more than {cell_file.MAX_NODES:,} YAML nodes' in error.reason
     assert 'reached at cell.name[' in error.reason
 
@@ -80,25 +75,20 @@ def test_files_over_the_size_limit_are_refused_before_parsing():
     assert read_cell_yaml(comments.encode(), 'cell.yaml') is None  # just under: read
     huge = b'cell: [' + b', '.join([b'0.125'] * 7_500_000) + b']\n'  # 50 MB of valid YAML
     for text in (huge, huge.decode(), b'#' * (limit + 1), 'é' * (limit // 2 + 1)):
-        start = time.perf_counter()
         error = _refusal(text)
-        assert time.perf_counter() - start < 0.5
         assert error.path == 'cell.yaml'
         assert f'({limit:,} bytes, 4 MiB)' in error.reason
     assert 'the file is 4,194,306 bytes' in _refusal('é' * (limit // 2 + 1)).reason
     assert 'the file is 52,500,007 bytes' in _refusal(huge).reason
 
 
-def test_a_file_near_the_size_limit_reads_in_a_second_or_so(default_text):
+def test_a_file_near_the_size_limit_is_read(default_text):  # bench/bench_cell.py times it
     points = ', '.join(f'[{i * 1e-5:.6f}, 0.25]' for i in range(30_000))  # 90,000 nodes
     text = _edit(default_text, 'obstacles: []', f'obstacles: [[{points}]]')
     text += ('# ' + 'x' * 97 + '\n') * ((cell_file.MAX_BYTES - len(text)) // 100)
     assert len(text) > cell_file.MAX_BYTES - 100
-    start = time.perf_counter()
     data = read_cell_yaml(text, 'cell.yaml')
-    elapsed = time.perf_counter() - start
     assert len(data['cell']['obstacles'][0]) == 30_000
-    assert elapsed < (3.0 if cell_file.HAVE_LIBYAML else 15.0)
 
 
 @pytest.mark.parametrize('libyaml', PARSERS)
@@ -187,11 +177,9 @@ def test_messages_quote_huge_values_briefly():
              lambda: schema.number(huge_text, 'robot.wafer_radius'),
              lambda: schema.vector(shared, 'robot.base', 2),
              lambda: schema.mapping({huge_text: 1}, 'robot', optional=('base',))]
-    for call in calls:
-        start = time.perf_counter()
+    for call in calls:  # a message built from the whole of ``shared`` would never end
         with pytest.raises(CellError) as info:
             call()
-        assert time.perf_counter() - start < 0.5
         assert len(str(info.value)) < 500
     assert len(schema.brief(shared)) <= schema.BRIEF
     assert schema.brief(0.15) == '0.15' and schema.brief('a') == "'a'"
