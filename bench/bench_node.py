@@ -37,7 +37,7 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
-from wafer_planner_ros.cell.model import station_pairs
+from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.node.planner_node import RELIABLE
 from wafer_planner_ros.recording.reading import read
 

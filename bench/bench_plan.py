@@ -25,7 +25,7 @@ import toppra.algorithm
 import toppra.constraint as tc
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
-from wafer_planner_ros.cell.model import station_pairs
+from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, STAGES
 from wafer_planner_ros.roadmap.cache import load_or_build
@@ -34,17 +34,17 @@ RESULTS = Path(__file__).resolve().parent / 'results' / 'plan.json'
 GRID = 2001
 
 
-class SplinePath(toppra.interpolator.AbstractGeometricPath):
-    """Our B-spline q(s), s in [0, T], as TOPP-RA's geometric path."""
+class CurvePath(toppra.interpolator.AbstractGeometricPath):
+    """Our curve q(s), s in [0, T], as TOPP-RA's geometric path."""
 
-    def __init__(self, spline):
-        """Wrap a CubicBSpline."""
-        self.spline = spline
+    def __init__(self, trajectory):
+        """Wrap a planner trajectory (``trajectory.curve.Trajectory``)."""
+        self.trajectory = trajectory
 
     def __call__(self, s, order=0):
         """Return the path or its derivative at s."""
         scalar = np.isscalar(s)
-        out = self.spline.evaluate(np.atleast_1d(s), order)
+        out = self.trajectory.evaluate(np.atleast_1d(s), order)
         return out[0] if scalar else out
 
     @property
@@ -55,15 +55,15 @@ class SplinePath(toppra.interpolator.AbstractGeometricPath):
     @property
     def path_interval(self):
         """Return the parameter range."""
-        return np.array([0.0, self.spline.duration])
+        return np.array([0.0, self.trajectory.duration])
 
     @property
     def waypoints(self):
-        """Return nothing: the path is a spline."""
+        """Return nothing: the path is a curve."""
         return None
 
 
-def toppra_time(cell, spline) -> dict:
+def toppra_time(cell, trajectory) -> dict:
     """Return TOPP-RA's time-optimal duration of the curve, and its own limit ratios."""
     robot = cell.robot
     arm, limit = robot.arm, robot.wafer_acceleration_limit
@@ -78,17 +78,17 @@ def toppra_time(cell, spline) -> dict:
             lambda q: np.concatenate([limit, limit]), dof=3),
     ]
     started = time.perf_counter()
-    solver = toppra.algorithm.TOPPRA(constraints, SplinePath(spline),
-                                     gridpoints=np.linspace(0.0, spline.duration, GRID),
+    solver = toppra.algorithm.TOPPRA(constraints, CurvePath(trajectory),
+                                     gridpoints=np.linspace(0.0, trajectory.duration, GRID),
                                      parametrizer='ParametrizeConstAccel')
-    trajectory = solver.compute_trajectory()
+    timed = solver.compute_trajectory()
     seconds = time.perf_counter() - started
-    if trajectory is None:
+    if timed is None:
         return {'duration': None, 'seconds': seconds}
-    t = np.linspace(0.0, trajectory.duration, 20001)
-    q, qd, qdd = trajectory(t), trajectory(t, 1), trajectory(t, 2)
+    t = np.linspace(0.0, timed.duration, 20001)
+    q, qd, qdd = timed(t), timed(t, 1), timed(t, 2)
     wafer = arm.wafer_acceleration(q, qd, qdd)
-    return {'duration': float(trajectory.duration), 'seconds': seconds,
+    return {'duration': float(timed.duration), 'seconds': seconds,
             'velocity_ratio': float(np.max(np.abs(qd) / robot.limits.velocity)),
             'acceleration_ratio': float(np.max(np.abs(qdd) / robot.limits.acceleration)),
             'wafer_ratio': float(np.max(np.abs(wafer) / limit))}
@@ -131,10 +131,10 @@ def main() -> int:
             row.update(status=exc.code.value, message=exc.message)
             rows.append(row)
             continue
-        reference = toppra_time(cell, result.spline)
+        reference = toppra_time(cell, result.trajectory)
         row.update(status='ok', cycle_time=result.cycle_time,
                    initial_cycle_time=result.initial_cycle_time,
-                   optimised=result.timing.optimised, timings_ms=dict(result.timings_ms),
+                   optimised=result.metrics['optimised'], timings_ms=dict(result.timings_ms),
                    candidates=result.metrics['candidates'], toppra=reference,
                    toppra_ratio=(result.cycle_time / reference['duration']
                                  if reference['duration'] else None))

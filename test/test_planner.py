@@ -6,13 +6,14 @@ from independent import check
 import numpy as np
 import pytest
 
-from wafer_planner_ros.cell.model import station_pairs
+from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings, STAGES
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS, Shaped
 from wafer_planner_ros.trajectory.verify import verify
 
 
@@ -35,7 +36,7 @@ def test_every_station_pair_passes_the_independent_check(cell, planner):
         result, plan = _plan(planner, start, goal)
         check(cell, plan, result.start_q, result.goal_q)
         assert result.cycle_time < result.initial_cycle_time
-        assert result.verification.ok and result.metrics['min_clearance'] > 0
+        assert result.verification.ok and result.min_clearance > 0
         # Both branches were candidates where the station allows both, and the one
         # returned is the fastest even though some were given up part-way.
         both = [len(cell.stations[n].configs) for n in (start, goal)]
@@ -76,10 +77,11 @@ def test_result_carries_samples_metrics_and_stage_timings(default_cell, default_
     assert result.times[-1] == result.cycle_time
     assert np.array_equal(result.positions[-1], result.goal_q)
     assert set(STAGES) | {'total'} == set(result.timings_ms)
-    for key in ('cycle_time', 'initial_cycle_time', 'joint_path_length', 'wafer_path_length',
-                'min_clearance', 'limit_ratios', 'peak_jerk', 'solver_iterations'):
+    for key in ('joint_path_length', 'wafer_path_length', 'solver_iterations', 'method',
+                'candidates', 'control_points'):
         assert key in result.metrics
-    assert max(result.metrics['limit_ratios'].values()) <= 1.0
+    assert max(result.verification.ratios.values()) <= 1.0
+    assert result.initial_cycle_time > result.cycle_time > 0.0
 
 
 def test_a_jerk_limit_is_met_everywhere(default_cell, default_roadmap):
@@ -88,9 +90,9 @@ def test_a_jerk_limit_is_met_everywhere(default_cell, default_roadmap):
     cell = replace(default_cell, robot=replace(robot, limits=replace(robot.limits, jerk=jerk)))
     free = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
     limited = Planner(cell, default_roadmap).plan('loadport2', 'loadlock2')
-    assert np.any(np.array(free.metrics['peak_jerk']) > jerk)  # would break the limit
-    assert limited.metrics['limit_ratios']['jerk'] <= 1.0
-    assert np.all(np.array(limited.metrics['peak_jerk']) <= jerk)
+    assert np.any(np.array(free.verification.peak_jerk) > jerk)  # would break the limit
+    assert limited.verification.ratios['jerk'] <= 1.0
+    assert np.all(np.array(limited.verification.peak_jerk) <= jerk)
     assert limited.cycle_time > free.cycle_time
 
 
@@ -99,6 +101,45 @@ def test_the_papers_pipeline_stays_selectable(default_cell, default_roadmap):
         'loadport2', 'loadlock2')
     assert result.verification.ok
     assert result.metrics['path_vertices'] == result.metrics['roadmap_path_vertices']
+
+
+class _Untimed(KnotTiming):
+    """A curve method that returns its starting point (the λ-scaled timing) as it is."""
+
+    name = 'untimed'
+    speed_up = 1.0
+
+    def finish(self, draft, give_up_above=None):
+        problem, (intervals, _) = draft.work
+        return Shaped(CubicBSpline.from_intervals(problem.points, intervals / self.speed_up),
+                      draft.estimate, {'speed_up': self.speed_up})
+
+
+class _Reckless(_Untimed):
+    """A curve method that runs its starting point twice as fast: past the limits."""
+
+    name = 'reckless'
+    speed_up = 2.0
+
+
+def test_a_curve_method_plugs_in_and_its_curve_is_verified(monkeypatch, default_cell,
+                                                           default_roadmap):
+    for method in (_Untimed, _Reckless):
+        monkeypatch.setitem(METHODS, method.name, method)
+    untimed = Planner(default_cell, default_roadmap, PlannerSettings(method='untimed')).plan(
+        'loadport2', 'loadlock2')
+    assert untimed.metrics['method'] == 'untimed' and untimed.metrics['speed_up'] == 1.0
+    assert untimed.cycle_time == pytest.approx(untimed.initial_cycle_time, rel=1e-12)
+    timed = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
+    assert timed.metrics['method'] == 'knot-timing'
+    assert timed.cycle_time < untimed.cycle_time
+    with pytest.raises(PlanningError) as info:
+        Planner(default_cell, default_roadmap, PlannerSettings(method='reckless')).plan(
+            'loadport2', 'loadlock2')
+    assert info.value.code == ErrorCode.VERIFICATION_FAILED
+    assert 'x its limit' in info.value.message
+    with pytest.raises(ValueError, match="method must be one of .*knot-timing.*'nonsense'"):
+        PlannerSettings(method='nonsense')
 
 
 @pytest.mark.parametrize('start, goal, code, words', [
@@ -145,27 +186,27 @@ def test_a_clearance_margin_is_kept_by_roadmap_curve_and_verification(
     assert plain.clearance(cached.roadmap.nodes).min() > margin
     planner, info = Planner(cell, cached.roadmap), roadmap_json(cached)
     without = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock1')
-    assert without.metrics['min_clearance'] < margin  # 0.3 mm from a wall without one
+    assert without.min_clearance < margin  # 0.3 mm from a wall without one
     for start, goal in (('loadport2', 'loadlock1'), ('loadlock2', 'loadport1')):
         result = planner.plan(start, goal)
         # check() tests collisions with fcl on bodies grown by the margin.
         check(cell, plan_json(result, info, cell.robot.joint_names), result.start_q,
               result.goal_q)
-        assert result.metrics['min_clearance'] > margin
+        assert result.min_clearance > margin
         t = np.linspace(0.0, result.cycle_time, 20001)
-        assert plain.clearance(result.spline.evaluate(t)).min() > margin
+        assert plain.clearance(result.trajectory.evaluate(t)).min() > margin
 
 
 def test_verification_fails_a_curve_that_is_not_finite_inside(default_cell, default_roadmap):
     result = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
-    points = result.spline.control_points.copy()
+    points = result.trajectory.control_points.copy()
     points[len(points) // 2, 1] = np.nan  # ends exact, a stretch in the middle undefined
-    broken = CubicBSpline(result.spline.knots, points)
+    broken = CubicBSpline(result.trajectory.knots, points)
     checked = verify(broken, default_cell, result.start_q, result.goal_q)
     assert not checked.ok
     assert 'the position is not finite everywhere' in checked.problems
     assert any(p.startswith('collision') for p in checked.problems)
-    assert verify(result.spline, default_cell, result.start_q, result.goal_q).ok
+    assert verify(result.trajectory, default_cell, result.start_q, result.goal_q).ok
 
 
 def test_one_branch_combination_can_be_asked_for(default_cell, default_roadmap):

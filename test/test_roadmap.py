@@ -35,9 +35,8 @@ def test_all_stations_in_one_component_and_every_pair_has_a_path(cell, roadmap):
             for _, j in roadmap.stations[b]:
                 found = find_path(roadmap, cell.clearance_model, cell.robot.lipschitz,
                                   roadmap.nodes[i], roadmap.nodes[j])
-                assert found is not None, f'no path {a} -> {b}'
-                path, nodes, _ = found
-                assert nodes[0] == i and nodes[-1] == j
+                assert found.path is not None, f'no path {a} -> {b}'
+                assert found.nodes[0] == i and found.nodes[-1] == j
 
 
 def test_station_nodes_are_the_station_configurations(cell, roadmap):
@@ -100,10 +99,10 @@ def test_arbitrary_configurations_connect_at_query_time(cell, roadmap):
         found = find_path(roadmap, model, lipschitz, start, goal)
         eager = _eager_length(roadmap, model, lipschitz, start, goal_node)
         if eager is not None:  # lazy certification finds the same shortest path
-            assert found is not None and found[2] == pytest.approx(eager, rel=1e-12)
-        if found is not None:
+            assert found.path is not None and found.length == pytest.approx(eager, rel=1e-12)
+        if found.path is not None:
             reached += 1
-            path = found[0]
+            path = found.path
             assert np.array_equal(path[0], start) and np.array_equal(path[-1], goal)
             assert len(colliding_segments(cell.fcl_model(), path[:-1], path[1:])) == 0
     assert reached >= 18

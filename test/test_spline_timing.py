@@ -59,7 +59,7 @@ def test_ends_are_exact_and_at_rest(spline):
 def _station_corridor(cell, roadmap, start, goal):
     model = cell.clearance_model
     path = find_path(roadmap, model, cell.robot.lipschitz, cell.stations[start].configs[0].q,
-                     cell.stations[goal].configs[0].q)[0]
+                     cell.stations[goal].configs[0].q).path
     return build_corridor(path, model.body_clearance(path), cell.robot.lipschitz)
 
 

@@ -20,10 +20,9 @@ from wafer_planner_ros.cell.schema import brief
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
-from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
-from wafer_planner_ros.trajectory.timing import optimise
-from wafer_planner_ros.trajectory.timing_problem import scaled_start, Timing, TimingProblem
+from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.methods import Draft, METHODS, Shaped
 from wafer_planner_ros.trajectory.tuning import TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
@@ -51,6 +50,8 @@ class PlannerSettings:
     """Size the safe boxes per body (beyond the paper; False: Eq. 3)."""
     extra_points: int = 1
     """Control points added on every straight stretch (beyond the paper)."""
+    method: str = 'knot-timing'
+    """How the curve through the corridor is shaped and timed (``trajectory.methods``)."""
     timing: TimingSettings = TimingSettings()
     """The time optimiser's tuning."""
 
@@ -63,6 +64,9 @@ class PlannerSettings:
                              f'{self.sample_period!r}')
         if not isinstance(self.extra_points, int) or self.extra_points < 0:
             raise ValueError(f'extra_points must be an integer >= 0, got {self.extra_points!r}')
+        if self.method not in METHODS:
+            raise ValueError(f'method must be one of {", ".join(sorted(METHODS))}, got '
+                             f'{self.method!r}')
 
     @classmethod
     def paper(cls, sample_period: float = 0.01) -> 'PlannerSettings':
@@ -90,8 +94,13 @@ class PlanResult:
     goal_q: np.ndarray
     branches: Tuple[Optional[int], Optional[int]]
     """The elbow branches used at start and goal (None for joint requests)."""
-    spline: CubicBSpline
+    trajectory: Trajectory
+    initial_cycle_time: float
+    """s: the cycle time the curve method started from (the paper's λ-scaled timing)."""
+    verification: Verification
+    """The dense check it passed: limit ratios, clearance, peak jerk."""
     times: np.ndarray
+    """(N,) the returned samples every ``sample_period``, then the exact final time."""
     positions: np.ndarray
     velocities: np.ndarray
     accelerations: np.ndarray
@@ -99,22 +108,20 @@ class PlanResult:
     """(P, 3) the A* path from the roadmap."""
     path: np.ndarray
     """(P', 3) the path the corridor was built on (after shortcuts)."""
-    timing: Timing
-    verification: Optional[Verification]
-    """The dense check; None only inside the planner, before it has run."""
     metrics: Mapping = field(default_factory=dict)
+    """What is measured nowhere else: path sizes and lengths, the method's figures."""
     timings_ms: Mapping = field(default_factory=dict)
     warnings: Tuple[str, ...] = ()
 
     @property
     def cycle_time(self) -> float:
         """Return the trajectory's duration (s)."""
-        return self.spline.duration
+        return self.trajectory.duration
 
     @property
-    def initial_cycle_time(self) -> float:
-        """Return the duration of the λ-scaled start point (the paper's initial point)."""
-        return float(self.timing.initial_intervals.sum())
+    def min_clearance(self) -> float:
+        """Return the smallest distance from the robot to a wall or obstacle (m)."""
+        return self.verification.min_clearance
 
 
 class Planner:
@@ -125,6 +132,7 @@ class Planner:
         self.cell = cell
         self.roadmap = roadmap
         self.settings = settings
+        self.method = METHODS[settings.method](cell, settings.timing)
 
     def endpoint(self, value, role: str) -> Endpoint:
         """Resolve a station name or three joint angles; raise PlanningError if unusable."""
@@ -198,121 +206,107 @@ class Planner:
                 except PlanningError as exc:
                     logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
                     failure = failure or exc
-        # Most promising first (the λ-scaled start's cycle time), so that a combination
-        # whose optimisation shows it cannot beat the best so far is given up early.
+        # Most promising first (the method's starting point), so that a combination whose
+        # optimisation shows it cannot beat the best so far is given up early.
         candidates, given_up = [], []
-        for pair in sorted(prepared, key=lambda p: p.start[0].sum()):
+        for pair in sorted(prepared, key=lambda p: p.draft.estimate):
             _check_deadline(deadline)
-            best = min((r.cycle_time for r in candidates), default=None)
-            result = self._timed(pair, best, stage_ms)
-            if result is None:
+            best = min((c.shaped.trajectory.duration for c in candidates), default=None)
+            candidate = self._finished(pair, best, stage_ms)
+            if candidate is None:
                 logger.debug('branches %s cannot beat %.3f s; given up', pair.branches, best)
                 given_up.append(pair)
             else:
-                candidates.append(result)
+                candidates.append(candidate)
         while candidates:
             # Shortest cycle first; only what is returned needs verifying.
-            for result in sorted(candidates, key=lambda r: r.cycle_time):
+            for candidate in sorted(candidates, key=lambda c: c.shaped.trajectory.duration):
                 _check_deadline(deadline)
                 try:
-                    result = self._verified(result, stage_ms)
+                    checked = self._verified(candidate, stage_ms)
                 except PlanningError as exc:
                     logger.warning('%s; trying the next branch combination', exc)
                     failure = failure or exc
                     continue
-                total = (time.perf_counter() - begun) * 1000.0
-                metrics = dict(result.metrics, candidates=len(prepared),
-                               given_up=len(given_up))
-                return replace(result, metrics=metrics,
-                               timings_ms=dict(stage_ms, total=total))
-            # Every faster one failed verification: optimise those given up after all.
-            candidates = [self._timed(pair, None, stage_ms) for pair in given_up]
+                counts = {'candidates': len(prepared), 'given_up': len(given_up)}
+                return self._result(candidate, checked, counts, dict(
+                    stage_ms, total=(time.perf_counter() - begun) * 1000.0))
+            # Every faster one failed verification: finish those given up after all.
+            candidates = [self._finished(pair, None, stage_ms) for pair in given_up]
             given_up = []
         raise failure
 
     def _prepared(self, a, b, qa, qb, branches, stage_ms) -> '_Prepared':
-        """Return the path, corridor and λ-scaled start between two configurations."""
+        """Return the path, corridor and the method's draft between two configurations."""
         model, lipschitz = self.cell.clearance_model, self.cell.robot.lipschitz
-        clock = _Clock(stage_ms)
-        found = find_path(self.roadmap, model, lipschitz, qa, qb, clock=clock)
-        if found is None:
+        route = find_path(self.roadmap, model, lipschitz, qa, qb)
+        stage_ms['connect'] += route.connect_ms
+        stage_ms['search'] += route.search_ms
+        if route.path is None:
             raise PlanningError(ErrorCode.NO_PATH,
                                 f'no path from {a.label} to {b.label} in the roadmap '
                                 f'({self.roadmap.node_count} nodes): connect more nodes or '
                                 'check the cell')
-        roadmap_path = simplify(found[0])
+        clock = _Clock(stage_ms)
+        roadmap_path = simplify(route.path)
         path = shortcut(roadmap_path, model, lipschitz) if self.settings.shortcut \
             else roadmap_path
         corridor = build_corridor(path, model.body_clearance(path), lipschitz,
                                   per_body=self.settings.per_body_boxes,
                                   extra=self.settings.extra_points)
         clock.lap('corridor')
-        problem = TimingProblem(corridor.control_points, self.cell.robot, self.settings.timing)
-        start = scaled_start(problem)
+        draft = self.method.draft(corridor)
         clock.lap('spline')
-        return _Prepared(a, b, qa, qb, branches, roadmap_path, path, corridor.control_points,
-                         problem, start)
+        return _Prepared(a, b, qa, qb, branches, roadmap_path, path,
+                         len(corridor.control_points), draft)
 
-    def _timed(self, pair: '_Prepared', give_up_above, stage_ms) -> Optional[PlanResult]:
-        """Return the optimised trajectory, not yet verified; None if it cannot win."""
+    def _finished(self, pair: '_Prepared', give_up_above, stage_ms) -> Optional['_Candidate']:
+        """Return the finished curve, not yet verified; None if it cannot win."""
         clock = _Clock(stage_ms)
-        timing = optimise(pair.problem, pair.start, give_up_above)
+        shaped = self.method.finish(pair.draft, give_up_above)
         clock.lap('optimise')
-        if timing is None:
-            return None
-        spline = CubicBSpline.from_intervals(pair.control_points, timing.intervals)
-        warnings = () if timing.optimised else (
-            f'time optimisation failed ({timing.message}); returning the λ-scaled timing',)
-        metrics = {
-            'cycle_time': spline.duration,
-            'initial_cycle_time': float(timing.initial_intervals.sum()),
-            'lambda': timing.scale,
-            'optimised': timing.optimised,
-            'solver_iterations': timing.iterations,
-            'constraint_rounds': timing.rounds,
-            'wafer_samples': timing.samples,
-            'roadmap_path_vertices': len(pair.roadmap_path),
-            'path_vertices': len(pair.path),
-            'control_points': len(pair.control_points),
-            'branches': list(pair.branches),
-        }
-        empty = np.empty((0, 3))
-        return PlanResult(
-            start=pair.a, goal=pair.b, start_q=pair.qa, goal_q=pair.qb, branches=pair.branches,
-            spline=spline, times=np.empty(0), positions=empty, velocities=empty,
-            accelerations=empty, roadmap_path=pair.roadmap_path, path=pair.path,
-            timing=timing, verification=None, metrics=metrics, warnings=warnings)
+        return None if shaped is None else _Candidate(pair, shaped)
 
-    def _verified(self, result: PlanResult, stage_ms) -> PlanResult:
-        """Return the result verified, sampled and measured; raise VERIFICATION_FAILED."""
+    def _verified(self, candidate: '_Candidate', stage_ms) -> Verification:
+        """Return the dense check of a candidate; raise VERIFICATION_FAILED if it fails."""
         clock = _Clock(stage_ms)
-        checked = verify(result.spline, self.cell, result.start_q, result.goal_q)
+        pair = candidate.pair
+        checked = verify(candidate.shaped.trajectory, self.cell, pair.qa, pair.qb)
         clock.lap('verify')
         if not checked.ok:
             raise PlanningError(ErrorCode.VERIFICATION_FAILED,
-                                f'the trajectory {result.start.label} -> {result.goal.label} '
+                                f'the trajectory {pair.a.label} -> {pair.b.label} '
                                 'failed verification: ' + '; '.join(checked.problems))
-        spline = result.spline
-        dense = spline.evaluate(np.linspace(0.0, spline.duration, 2001))
+        return checked
+
+    def _result(self, candidate: '_Candidate', checked: Verification, counts: dict,
+                timings_ms: dict) -> PlanResult:
+        """Return the verified candidate sampled and measured."""
+        pair, trajectory = candidate.pair, candidate.shaped.trajectory
+        dense = trajectory.evaluate(np.linspace(0.0, trajectory.duration, 2001))
         wafer = self.cell.robot.arm.wafer_center(dense)
         metrics = dict(
-            result.metrics, min_clearance=checked.min_clearance,
-            limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk),
-            limit_checks=checked.limit_samples, collision_checks=checked.collision_samples,
+            candidate.shaped.metrics, method=self.method.name,
+            roadmap_path_vertices=len(pair.roadmap_path), path_vertices=len(pair.path),
+            control_points=pair.control_points, branches=list(pair.branches),
             joint_path_length=float(np.linalg.norm(np.diff(dense, axis=0), axis=1).sum()),
-            wafer_path_length=float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()))
+            wafer_path_length=float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()),
+            **counts)
         # Samples every sample_period, then the exact final point.
-        period = self.settings.sample_period
-        times = np.arange(0.0, spline.duration - 1e-9, period)
-        times = np.append(times, spline.duration)
-        positions, velocities, accelerations = spline.evaluate_orders(times)
-        return replace(result, verification=checked, metrics=metrics, times=times,
-                       positions=positions, velocities=velocities, accelerations=accelerations)
+        times = np.arange(0.0, trajectory.duration - 1e-9, self.settings.sample_period)
+        times = np.append(times, trajectory.duration)
+        positions, velocities, accelerations = trajectory.evaluate_orders(times)
+        return PlanResult(
+            start=pair.a, goal=pair.b, start_q=pair.qa, goal_q=pair.qb, branches=pair.branches,
+            trajectory=trajectory, initial_cycle_time=candidate.shaped.initial_cycle_time,
+            verification=checked, times=times, positions=positions, velocities=velocities,
+            accelerations=accelerations, roadmap_path=pair.roadmap_path, path=pair.path,
+            metrics=metrics, timings_ms=timings_ms, warnings=candidate.shaped.warnings)
 
 
 @dataclass(frozen=True, eq=False)
 class _Prepared:
-    """One elbow-branch combination up to its time optimisation."""
+    """One elbow-branch combination up to its curve method's draft."""
 
     a: Endpoint
     b: Endpoint
@@ -321,10 +315,17 @@ class _Prepared:
     branches: Tuple[Optional[int], Optional[int]]
     roadmap_path: np.ndarray
     path: np.ndarray
-    control_points: np.ndarray
-    problem: TimingProblem
-    start: tuple
-    """``scaled_start(problem)``: (intervals, λ)."""
+    control_points: int
+    """How many control points the corridor placed."""
+    draft: Draft
+
+
+@dataclass(frozen=True, eq=False)
+class _Candidate:
+    """A finished combination, before verification."""
+
+    pair: _Prepared
+    shaped: Shaped
 
 
 class _Clock:

@@ -101,9 +101,8 @@ def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> N
 
 def plot_trajectory(cell, result, path, outlines: int = 14) -> None:
     """Write a PNG of a plan like the paper's Figs. 10-13: motion, joints, wafer."""
-    spline = result.spline
-    t = np.linspace(0.0, spline.duration, 1500)
-    q, qd, qdd = spline.evaluate_orders(t)
+    t = np.linspace(0.0, result.cycle_time, 1500)
+    q, qd, qdd = result.trajectory.evaluate_orders(t)
     plot_motion(cell, t, q, qd, qdd,
                 f'{result.start.label} -> {result.goal.label}: cycle time '
                 f'{result.cycle_time:.3f} s (λ-scaled {result.initial_cycle_time:.3f} s), '

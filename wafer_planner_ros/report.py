@@ -5,7 +5,6 @@ import numpy as np
 
 def plan_json(result, roadmap_info: dict, joint_names) -> dict:
     """Return a successful plan as the SPEC's JSON object."""
-    spline = result.spline
     points = [{'t': float(t), 'q': q.tolist(), 'qd': qd.tolist(), 'qdd': qdd.tolist()}
               for t, q, qd, qdd in zip(result.times, result.positions, result.velocities,
                                        result.accelerations)]
@@ -16,15 +15,22 @@ def plan_json(result, roadmap_info: dict, joint_names) -> dict:
         'joint_names': list(joint_names),
         'cycle_time': result.cycle_time,
         'initial_cycle_time': result.initial_cycle_time,
-        'spline': {'degree': 3, 'knots': spline.knots.tolist(),
-                   'control_points': spline.control_points.tolist()},
+        'spline': result.trajectory.describe(),
         'points': points,
         'path': result.path.tolist(),
         'roadmap_path': result.roadmap_path.tolist(),
-        'metrics': _plain(result.metrics),
+        'metrics': _plain(measured(result)),
         'timings_ms': _plain(result.timings_ms),
         'roadmap': roadmap_info,
     }
+
+
+def measured(result) -> dict:
+    """Return what was measured of a plan: the verification's figures and the metrics."""
+    checked = result.verification
+    return dict(result.metrics, min_clearance=checked.min_clearance,
+                limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk),
+                limit_checks=checked.limit_samples, collision_checks=checked.collision_samples)
 
 
 def error_json(code: str, message: str, start, goal, roadmap_info: dict) -> dict:

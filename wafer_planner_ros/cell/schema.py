@@ -11,6 +11,10 @@ BRIEF = 200
 """Longest quotation of a value in a message (characters)."""
 MAX_TEXT = 200
 """Longest name ``text()`` accepts (characters)."""
+MAX_COORDINATE = 1000.0
+"""m: the largest |x| or |y| of a polygon vertex or the base (an EFEM is a few metres)."""
+MAX_JOINT_ANGLE = 100.0
+"""rad: the largest |position limit| or heading (about 16 turns)."""
 
 # Bounded at every level: a value can be an alias-expanded structure of 10**5 nodes, or a
 # string of megabytes, and its full repr would be built before any slicing of it.
@@ -104,3 +108,18 @@ def _digits(value: int) -> str:
         return f'{sign}an integer of about {int(abs(value).bit_length() * math.log10(2)):,} ' \
                f'digits'
     return f'{sign}{digits[:5]}...{digits[-4:]} ({len(digits):,} digits)'
+
+
+def coordinates(values, path: str, beyond: str = 'farther out than'):
+    """
+    Return ``values`` (m); refuse one beyond MAX_COORDINATE, too large to be part of a cell.
+
+    Beyond it the geometry's arithmetic would overflow long before it meant anything.
+    """
+    values = np.asarray(values, float)
+    far = np.argwhere(np.abs(values) > MAX_COORDINATE)
+    if len(far):
+        where = ''.join(f'[{int(k)}]' for k in far[0])  # nothing for a single number
+        raise CellError(f'{path}{where}', f'{values[tuple(far[0])]:.6g} m is {beyond} '
+                                          f'{MAX_COORDINATE:g} m: not a plausible cell')
+    return values

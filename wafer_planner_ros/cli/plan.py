@@ -4,7 +4,7 @@ import argparse
 from pathlib import Path
 import sys
 
-from wafer_planner_ros.cell.model import station_pairs
+from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_FAILURE, EXIT_OK
 from wafer_planner_ros.cli.common import load_cell, roadmap_for, run, UsageError, write_json
 from wafer_planner_ros.errors import PlanningError

@@ -46,15 +46,15 @@ def roadmap_markers(cell, roadmap, frame_id: str, stamp) -> MarkerArray:
 
 def path_markers(cell, result, frame_id: str, stamp) -> MarkerArray:
     """Return the latest plan: joint-space path, wafer-centre trace, robot outlines."""
-    arm, spline = cell.robot.arm, result.spline
-    t = np.linspace(0.0, spline.duration, 400)
-    q = spline.evaluate(t)
+    arm, trajectory = cell.robot.arm, result.trajectory
+    q = trajectory.evaluate(np.linspace(0.0, trajectory.duration, 400))
     markers = [
         _strip('path_joint_space', 0, _JointBox(cell).place(q), (1.0, 0.9, 0.2, 1.0), 0.006),
         _strip('wafer_trace', 0, arm.wafer_center(q), (1.0, 0.9, 0.2, 1.0), 0.006),
     ]
     outline = _marker('robot', 0, Marker.LINE_LIST, (0.9, 0.9, 0.9, 0.6))
-    joints = arm.joint_points(spline.evaluate(np.linspace(0.0, spline.duration, OUTLINES)))
+    joints = arm.joint_points(trajectory.evaluate(np.linspace(0.0, trajectory.duration,
+                                                              OUTLINES)))
     segments = np.stack([joints[:, :-1], joints[:, 1:]], axis=2).reshape(-1, 2)
     outline.points = _points(segments)
     outline.scale.x = 0.01

@@ -24,6 +24,17 @@ def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> by
                                 result.accelerations)
 
 
+def plan_answer(result, request, roadmap, joint_names: Sequence[str], stamp,
+                node_ms: float) -> tuple:
+    """Return a successful plan's (JointTrajectory, ``~/result`` status), serialised."""
+    message = '; '.join(result.warnings) or (
+        f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
+    values = dict(plan_values(result, roadmap, request.start, request.goal), node_ms=node_ms)
+    return (trajectory(result, request.request_id, joint_names, stamp),
+            result_status(request.request_id, 'warn' if result.warnings else 'ok', message,
+                          values))
+
+
 def result_status(request_id: str, level: str, message: str,
                   values: Mapping[str, object]) -> bytes:
     """Return the serialised ``~/result`` status: name = request id, values as strings."""
@@ -44,8 +55,8 @@ def plan_values(result, roadmap, start, goal) -> dict:
                    if stage != 'total'})
     values.update(_ends(roadmap, start, goal))
     values.update({f'ratio_{name}': ratio
-                   for name, ratio in result.metrics['limit_ratios'].items()})
-    values['min_clearance'] = result.metrics['min_clearance']
+                   for name, ratio in result.verification.ratios.items()})
+    values['min_clearance'] = result.min_clearance
     values['branches'] = result.branches
     return values
 

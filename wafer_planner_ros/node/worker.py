@@ -289,21 +289,11 @@ class PlanningWorker:
                                   request.start, request.goal,
                                   (time.monotonic() - begun) * 1000.0, roadmap)
                 return
-            doing = 'answering'
-            stamp = self._stamp()
-            level = 'warn' if result.warnings else 'ok'
-            message = '; '.join(result.warnings) or (
-                f'ok: {result.start.label} -> {result.goal.label} in '
-                f'{result.cycle_time:.3f} s')
+            doing, stamp = 'answering', self._stamp()
             # The trajectory and its result go together (the node records both, then
             # publishes them); the markers, for people, after both.
-            answer = (
-                messages.trajectory(result, request.request_id,
-                                    planner.cell.robot.joint_names, stamp),
-                messages.result_status(
-                    request.request_id, level, message,
-                    dict(messages.plan_values(result, roadmap, request.start, request.goal),
-                         node_ms=(time.monotonic() - received) * 1000.0)))
+            answer = messages.plan_answer(result, request, roadmap, joints, stamp,
+                                          (time.monotonic() - received) * 1000.0)
         except Exception as exc:  # noqa: B902 - every request gets its one answer
             self.answer_internal(number, request.request_id, exc, doing, request.start,
                                  request.goal,

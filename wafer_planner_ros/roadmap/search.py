@@ -1,6 +1,8 @@
 """A* over the roadmap (paper section 3): the shortest path in joint-space length."""
 
 from collections import defaultdict
+from dataclasses import dataclass
+import time
 from typing import Mapping, Optional, Sequence, Tuple
 
 from numba import njit
@@ -121,22 +123,53 @@ def _sift_down(keys, nodes, size):
         i = child
 
 
-def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np.ndarray,
-              clock=None, neighbors=None):
+@dataclass(frozen=True, eq=False)
+class Route:
+    """What a query found: the path, or None, and where the time went."""
+
+    path: Optional[np.ndarray]
+    """(P, 3) configurations from start to goal; None when there is no path."""
+    nodes: Optional[np.ndarray]
+    """(P,) roadmap node indices, -1 for query configurations."""
+    length: float
+    """Joint-space length of the path (inf without one)."""
+    connect_ms: float
+    """Connecting the query configurations: neighbours and edge certification."""
+    search_ms: float
+    """A* itself."""
+
+
+def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray,
+              goal: np.ndarray) -> Route:
     """
-    Return the shortest roadmap path between two free configurations, or None.
+    Return the shortest roadmap path between two free configurations.
 
     A configuration that is a roadmap node (a station) is used as that node; any other is
-    connected at query time to its ``neighbors`` nearest nodes (first ``query_neighbors``,
-    then ``station_neighbors`` if that finds no path), and the straight line from start to
-    goal is also a candidate. These query edges are certified lazily (as in Lazy PRM): A*
-    runs with all of them, then the ones on the path found are certified; when one fails,
-    every remaining query edge of that configuration is certified at once and A* runs
-    again. The answer is the same shortest path over certified edges as certifying them
-    all first, usually for two certifications instead of forty. Returns
-    ``(configurations (P, 3), node indices (-1 for query configurations), length)``.
-    ``clock.lap(stage)`` adds time to the 'connect' and 'search' stages when given.
+    connected at query time to its nearest nodes (first ``query_neighbors``, then
+    ``station_neighbors`` if that finds no path), and the straight line from start to goal
+    is also a candidate. These query edges are certified lazily (as in Lazy PRM): A* runs
+    with all of them, then the ones on the path found are certified; when one fails, every
+    remaining query edge of that configuration is certified at once and A* runs again. The
+    answer is the same shortest path over certified edges as certifying them all first,
+    usually for two certifications instead of forty.
     """
+    spent = [0.0, 0.0, time.perf_counter()]  # connect, search (ms), last instant
+    found = None
+    for neighbors in (roadmap.settings.query_neighbors, roadmap.settings.station_neighbors):
+        found, queried = _search(roadmap, model, lipschitz, start, goal, neighbors, spent)
+        if found is not None or not queried:
+            break
+    if found is None:
+        return Route(None, None, np.inf, spent[0], spent[1])
+    path, length = found
+    path = np.array(path)
+    coords = np.vstack([roadmap.nodes, start, goal])
+    n = roadmap.node_count
+    return Route(coords[path], np.where(path < n, path, -1), length, spent[0], spent[1])
+
+
+def _search(roadmap, model, lipschitz, start, goal, neighbors: int, spent: list) -> tuple:
+    """Return (A*'s (path, length) or None, whether an end is a query configuration)."""
     n = roadmap.node_count
     ends = [np.asarray(start, float), np.asarray(goal, float)]
     clearance = model.body_clearance(np.stack(ends))
@@ -149,18 +182,15 @@ def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np
             index.append(int(nearest))
             continue
         index.append(virtual)
-        k = min(neighbors or roadmap.settings.query_neighbors, n)
-        nodes = np.atleast_1d(roadmap.tree.query(q, k=k)[1])
+        nodes = np.atleast_1d(roadmap.tree.query(q, k=min(neighbors, n))[1])
         for j in nodes.tolist():
             _link(extra, pending, coords, virtual, j)
     if index[0] >= n or index[1] >= n:
         _link(extra, pending, coords, index[0], index[1])
-    if clock is not None:
-        clock.lap('connect')
+    _lap(spent, 0)
     while True:
         found = astar(roadmap.graph, coords, index[0], index[1], extra)
-        if clock is not None:
-            clock.lap('search')
+        _lap(spent, 1)
         if found is None:
             break
         unchecked = [edge for edge in zip(found[0][:-1], found[0][1:])
@@ -172,16 +202,15 @@ def find_path(roadmap, model, lipschitz: np.ndarray, start: np.ndarray, goal: np
         rest = [edge for edge in pending if set(edge) & failed]
         if rest:
             _certify(model, lipschitz, coords, body_clearance, extra, pending, rest)
-        if clock is not None:
-            clock.lap('connect')
-    wider = roadmap.settings.station_neighbors
-    if found is None and max(index) >= n and (neighbors or 0) < wider:
-        return find_path(roadmap, model, lipschitz, start, goal, clock, wider)
-    if found is None:
-        return None
-    path, length = found
-    path = np.array(path)
-    return coords[path], np.where(path < n, path, -1), length
+        _lap(spent, 0)
+    return found, max(index) >= n
+
+
+def _lap(spent: list, phase: int) -> None:
+    """Add the milliseconds since the last lap to ``spent[phase]``."""
+    now = time.perf_counter()
+    spent[phase] += (now - spent[2]) * 1000.0
+    spent[2] = now
 
 
 def _link(extra, pending, coords, a: int, b: int) -> None:

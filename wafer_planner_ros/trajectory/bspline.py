@@ -21,6 +21,8 @@ from math import factorial
 from numba import njit
 import numpy as np
 
+from wafer_planner_ros.trajectory.curve import Trajectory
+
 DEGREE = 3
 WINDOW = 2 * DEGREE + 1
 """Durations a span's points depend on: h_{s-3}..h_{s+3}."""
@@ -132,7 +134,7 @@ def _horner(coefficients, starts, span, t, order):
 
 
 @dataclass(frozen=True, eq=False)
-class CubicBSpline:
+class CubicBSpline(Trajectory):
     """A clamped cubic B-spline q(t) in joint space."""
 
     knots: np.ndarray
@@ -167,10 +169,6 @@ class CubicBSpline:
             points = derivative_points(points, knots, degree)
             knots, degree = knots[1:-1], degree - 1
         return points, knots, degree
-
-    def evaluate(self, t, order: int = 0) -> np.ndarray:
-        """Return q (order 0), q', q'' or q''' at times t (clipped to [0, T]), (len(t), 3)."""
-        return self.evaluate_orders(t, (order,))[0]
 
     def evaluate_orders(self, t, orders=(0, 1, 2)) -> tuple:
         """
@@ -213,6 +211,11 @@ class CubicBSpline:
         peaks = np.where(inside, np.maximum(peaks, extreme), peaks)
         boundaries = (starts[:, None] + tau[:, :-1, 0]).ravel()
         return np.append(boundaries, self.duration), peaks.reshape(-1, 3)
+
+    def describe(self) -> dict:
+        """Return the degree, the knots and the control points."""
+        return {'degree': DEGREE, 'knots': self.knots.tolist(),
+                'control_points': self.control_points.tolist()}
 
     @cached_property
     def _pieces(self) -> tuple:

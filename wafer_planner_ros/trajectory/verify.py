@@ -12,6 +12,8 @@ from typing import Mapping, Tuple
 
 import numpy as np
 
+from wafer_planner_ros.trajectory.curve import Trajectory
+
 LIMIT_STEP = 1e-3      # s
 COLLISION_STEP = 1e-3  # rad
 END_TOLERANCE = 1e-9   # rad/s, rad/s^2: "zero" at the ends, up to rounding
@@ -38,13 +40,13 @@ class Verification:
         return not self.problems
 
 
-def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
-    """Check a spline trajectory of ``cell``'s robot from start to goal."""
+def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
+    """Check a trajectory of ``cell``'s robot from start to goal."""
     robot = cell.robot
     limits = robot.limits
-    duration = spline.duration
+    duration = trajectory.duration
     t = np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
-    q, qd, qdd, qddd = spline.evaluate_orders(t, range(4))
+    q, qd, qdd, qddd = trajectory.evaluate_orders(t, range(4))
     wafer = robot.arm.wafer_acceleration(q, qd, qdd)
     ratios = {
         'velocity': _ratio(qd, limits.velocity),
@@ -73,7 +75,7 @@ def verify(spline, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
     if ends > END_TOLERANCE:
         problems.append(f'velocity or acceleration at an end is {ends:.3g}, not zero')
     # The model's bodies are grown by the clearance margin: <= 0 is closer than the margin.
-    clearance, checks = dense_clearance(spline, cell.clearance_model)
+    clearance, checks = dense_clearance(trajectory, cell.clearance_model)
     distance = clearance + robot.clearance_margin
     if not clearance > 0.0:
         problems.append(f'collision (clearance {distance * 1000:.2f} mm' + (
@@ -88,21 +90,21 @@ def _ratio(values: np.ndarray, limit) -> float:
     return float(np.max(np.abs(values) / limit))
 
 
-def dense_clearance(spline, model) -> tuple:
+def dense_clearance(trajectory: Trajectory, model) -> tuple:
     """Return (smallest clearance, checks) at the times of ``collision_times``."""
-    q = spline.evaluate(collision_times(spline))
+    q = trajectory.evaluate(collision_times(trajectory))
     return float(model.clearance(q).min()), len(q)
 
 
-def collision_times(spline) -> np.ndarray:
+def collision_times(trajectory: Trajectory) -> np.ndarray:
     """
     Return check times such that no joint moves more than COLLISION_STEP between two.
 
-    Each span is cut into pieces on which the exact peak joint speed is known
-    (``CubicBSpline.peak_speed``); checks on a piece are ``COLLISION_STEP / that peak``
+    The curve is cut into pieces on which the exact peak joint speed is known
+    (``Trajectory.peak_speed``); checks on a piece are ``COLLISION_STEP / that peak``
     seconds apart. The first and last times are 0 and the duration.
     """
-    boundaries, peaks = spline.peak_speed()
+    boundaries, peaks = trajectory.peak_speed()
     # A piece whose speed is not finite fails verification anyway (and its configurations
     # count as colliding): one check is enough there, not a count cast from NaN.
     peaks = np.where(np.isfinite(peaks), peaks, 0.0)
@@ -110,4 +112,4 @@ def collision_times(spline) -> np.ndarray:
     counts = np.maximum(np.ceil(lengths * peaks.max(axis=1) / COLLISION_STEP).astype(int), 1)
     offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
     t = np.repeat(boundaries[:-1], counts) + offsets * np.repeat(lengths / counts, counts)
-    return np.append(t, spline.duration)
+    return np.append(t, trajectory.duration)

@@ -1,0 +1,42 @@
+"""
+What a timed joint-space curve offers to everything after the planner.
+
+In the spirit of toppra's ``AbstractGeometricPath`` and drake's ``Trajectory``: verification,
+reports, markers, recordings and figures use only this interface, never a particular kind
+of curve, so that a new way of shaping or timing one plugs in without touching them.
+"""
+
+from abc import ABC, abstractmethod
+from typing import Mapping, Sequence, Tuple
+
+import numpy as np
+
+
+class Trajectory(ABC):
+    """A curve q(t) in joint space for t in [0, duration], starting and ending at rest."""
+
+    @property
+    @abstractmethod
+    def duration(self) -> float:
+        """Return the total time T (s)."""
+
+    @abstractmethod
+    def evaluate_orders(self, t, orders: Sequence[int] = (0, 1, 2)) -> Tuple[np.ndarray, ...]:
+        """Return the derivatives of the given orders at times t (clipped to [0, T])."""
+
+    def evaluate(self, t, order: int = 0) -> np.ndarray:
+        """Return q (order 0), q', q'' or q''' at times t (clipped to [0, T]), (len(t), J)."""
+        return self.evaluate_orders(t, (order,))[0]
+
+    @abstractmethod
+    def peak_speed(self, subdivisions: int = 8) -> Tuple[np.ndarray, np.ndarray]:
+        """
+        Return (boundaries (S + 1,), peaks (S, J)): the curve in pieces and each one's peaks.
+
+        ``boundaries`` are the pieces' times (``subdivisions`` pieces per polynomial span),
+        ``peaks`` the exact largest |q'_j| of every joint on each piece.
+        """
+
+    @abstractmethod
+    def describe(self) -> Mapping:
+        """Return the curve as plain data (lists and numbers) that defines it exactly."""
