@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(ENV) $(PY) bench/bench_plan.py
 	$(ENV) $(PY) bench/bench_node.py
 	$(ENV) $(PY) bench/bench_cell.py
+	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
 
 clean:
 	rm -rf .colcon

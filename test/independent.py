@@ -2,8 +2,9 @@
 An independent check of a planned trajectory, sharing no code with the planner's own.
 
 The spline is evaluated by scipy's BSpline from the knots and control points as exported;
-the wafer acceleration comes from second differences of forward-kinematics positions (a
-weighted average of the true acceleration, so never above its peak); collisions are checked
+the wafer acceleration comes from second differences of forward-kinematics positions and
+the jerk from first differences of the acceleration (weighted averages of the true values,
+so never above their peaks); collisions are checked
 by python-fcl at configurations no more than 1 mrad apart in any joint.
 """
 
@@ -33,6 +34,10 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
     assert np.all(q >= lower) and np.all(q <= upper)
     ratios = {'velocity': float(np.max(np.abs(qd) / robot.limits.velocity)),
               'acceleration': float(np.max(np.abs(qdd) / robot.limits.acceleration))}
+    if robot.limits.jerk is not None:
+        # Differences of the acceleration: averages of the jerk, never above its peak.
+        jerk = np.diff(qdd, axis=0) / np.diff(t)[:, None]
+        ratios['jerk'] = float(np.max(np.abs(jerk) / robot.limits.jerk))
     # Wafer acceleration from positions only.
     h = 1e-4
     inner = t[(t > h) & (t < duration - h)]

@@ -111,7 +111,10 @@ class Harness(Peer):
 
     def __init__(self, parameters: dict):
         """Start the node with ``parameters`` (name -> value) and wait until it is ready."""
+        # The station table and the budgeted optimisation take seconds to minutes of CPU
+        # and their answers depend on time: off unless a test turns them on.
         parameters = {'recording.directory': tempfile.mkdtemp(prefix='wafer_recordings_'),
+                      'planning.station_table': False, 'planning.optimise_budget': 0.0,
                       **parameters}
         self.recordings = parameters['recording.directory']
         context = rclpy.Context()

@@ -33,7 +33,7 @@ def test_default_cell_has_the_spec_values(default_cell):
     assert r.limits.position.tolist() == [[-3.14159, 3.14159]] * 3
     assert r.limits.velocity.tolist() == [4.2, 8.4, 6.3]
     assert r.limits.acceleration.tolist() == [8.4, 16.8, 12.6]
-    assert r.limits.jerk is None
+    assert r.limits.jerk.tolist() == [84.0, 168.0, 126.0]  # 10 x acceleration
     assert r.wafer_acceleration_limit.tolist() == [0.981, 0.981]
     assert r.wafer_acceleration_norm_limit is None
     assert sorted(cell.stations) == ['loadlock1', 'loadlock2', 'loadport1', 'loadport2',

@@ -471,7 +471,7 @@ def _json(data) -> str:
 def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp_path):
     from rclpy.parameter import Parameter
     from wafer_planner_ros.node.planner_node import WaferPlannerNode
-    from wafer_planner_ros.node.worker import Sent
+    from wafer_planner_ros.node.messages import Sent
     context = rclpy.Context()
     rclpy.init(context=context)
     missing = tmp_path / 'missing.yaml'

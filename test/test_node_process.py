@@ -42,6 +42,7 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
         dds_env, roadmap_cache, tmp_path, default_roadmap):
     node = subprocess.Popen(
         [sys.executable, '-m', 'wafer_planner_ros.node.planner_node', '--ros-args',
+         '-p', 'planning.station_table:=false', '-p', 'planning.optimise_budget:=0.0',
          '-p', f'roadmap.cache_dir:={roadmap_cache}', '-p', 'planning.timeout:=60.0',
          '-p', f'recording.directory:={tmp_path / "recordings"}'],
         env=dds_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -72,6 +73,7 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
 def test_node_process_rejects_a_bad_parameter(dds_env):
     node = subprocess.run(
         [sys.executable, '-m', 'wafer_planner_ros.node.planner_node', '--ros-args',
+         '-p', 'planning.station_table:=false', '-p', 'planning.optimise_budget:=0.0',
          '-p', 'planning.max_queue:=0'], env=dds_env, capture_output=True, text=True,
         timeout=120)
     assert node.returncode != 0

@@ -14,6 +14,7 @@ from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS, Shaped
+from wafer_planner_ros.trajectory.tuning import TimingSettings
 from wafer_planner_ros.trajectory.verify import verify
 
 
@@ -86,10 +87,13 @@ def test_result_carries_samples_metrics_and_stage_timings(default_cell, default_
 
 def test_a_jerk_limit_is_met_everywhere(default_cell, default_roadmap):
     robot = default_cell.robot
-    jerk = np.array([84.0, 168.0, 126.0])  # the commented values of efem_default.yaml
-    cell = replace(default_cell, robot=replace(robot, limits=replace(robot.limits, jerk=jerk)))
-    free = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
-    limited = Planner(cell, default_roadmap).plan('loadport2', 'loadlock2')
+    jerk = robot.limits.jerk
+    assert np.array_equal(jerk, [84.0, 168.0, 126.0])  # efem_default.yaml: 10 x acceleration
+    cell = replace(default_cell, robot=replace(robot, limits=replace(robot.limits, jerk=None)))
+    free = Planner(cell, default_roadmap).plan('loadport2', 'loadlock2')
+    limited = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
+    # Without a limit no span is shorter than the documented minimum.
+    assert free.trajectory.intervals.min() >= TimingSettings().min_interval_without_jerk
     assert np.any(np.array(free.verification.peak_jerk) > jerk)  # would break the limit
     assert limited.verification.ratios['jerk'] <= 1.0
     assert np.all(np.array(limited.verification.peak_jerk) <= jerk)
@@ -109,7 +113,7 @@ class _Untimed(KnotTiming):
     name = 'untimed'
     speed_up = 1.0
 
-    def finish(self, draft, give_up_above=None):
+    def finish(self, draft, give_up_above=None, until=None):
         problem, (intervals, _) = draft.work
         return Shaped(CubicBSpline.from_intervals(problem.points, intervals / self.speed_up),
                       draft.estimate, {'speed_up': self.speed_up})

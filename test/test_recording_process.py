@@ -28,6 +28,7 @@ def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals):
     recordings = tmp_path / 'recordings'
     node = subprocess.Popen(
         [sys.executable, '-m', 'wafer_planner_ros.node.planner_node', '--ros-args',
+         '-p', 'planning.station_table:=false', '-p', 'planning.optimise_budget:=0.0',
          '-p', f'roadmap.cache_dir:={roadmap_cache}', '-p', f'recording.directory:={recordings}',
          '-p', 'planning.timeout:=60.0', '-p', 'planning.max_queue:=100'],
         env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

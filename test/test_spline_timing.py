@@ -64,7 +64,7 @@ def _station_corridor(cell, roadmap, start, goal):
 
 
 def test_peak_speed_is_the_exact_maximum_on_each_piece(spline):
-    boundaries, peaks = spline.peak_speed(subdivisions=4)
+    boundaries, peaks = spline.pieces(subdivisions=4)
     assert boundaries[0] == 0.0 and boundaries[-1] == spline.duration
     for lo, hi, peak in zip(boundaries[:-1], boundaries[1:], peaks):
         sampled = np.abs(spline.evaluate(np.linspace(lo, hi, 4001), 1)).max(axis=0)

@@ -23,7 +23,7 @@ from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import Draft, METHODS, Shaped
-from wafer_planner_ros.trajectory.tuning import TimingSettings
+from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
@@ -54,6 +54,8 @@ class PlannerSettings:
     """How the curve through the corridor is shaped and timed (``trajectory.methods``)."""
     timing: TimingSettings = TimingSettings()
     """The time optimiser's tuning."""
+    shape: ShapeSettings = ShapeSettings()
+    """The whole-curve optimiser's tuning."""
 
     def __post_init__(self):
         """Reject unusable settings."""
@@ -132,7 +134,7 @@ class Planner:
         self.cell = cell
         self.roadmap = roadmap
         self.settings = settings
-        self.method = METHODS[settings.method](cell, settings.timing)
+        self.method = METHODS[settings.method](cell, settings.timing, settings.shape)
 
     def endpoint(self, value, role: str) -> Endpoint:
         """Resolve a station name or three joint angles; raise PlanningError if unusable."""
@@ -177,16 +179,20 @@ class Planner:
         return Endpoint(','.join(f'{v:g}' for v in q), ((None, q),))
 
     def plan(self, start, goal, deadline: Optional[float] = None,
-             branches: Optional[Tuple[Optional[int], Optional[int]]] = None) -> PlanResult:
+             branches: Optional[Tuple[Optional[int], Optional[int]]] = None,
+             budget: Optional[float] = None) -> PlanResult:
         """
         Return the verified trajectory from start to goal with the shortest cycle time.
 
         ``deadline``: a ``time.monotonic()`` instant after which the request gives up with
         TIMEOUT. ``branches``: plan only this (start, goal) elbow-branch combination (None
-        for joint angles), e.g. to see what each one costs. Raises PlanningError with the
-        code of the first reason it cannot answer.
+        for joint angles), e.g. to see what each one costs. ``budget``: seconds from now
+        after which a curve method that improves step by step returns the best curve it has
+        (verified like any other). Raises PlanningError with the code of the first reason it
+        cannot answer.
         """
         begun = time.perf_counter()
+        until = None if budget is None else time.monotonic() + budget
         a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
         if branches is not None:
             a, b = (_only_branch(end, elbow, role) for end, elbow, role in
@@ -212,7 +218,7 @@ class Planner:
         for pair in sorted(prepared, key=lambda p: p.draft.estimate):
             _check_deadline(deadline)
             best = min((c.shaped.trajectory.duration for c in candidates), default=None)
-            candidate = self._finished(pair, best, stage_ms)
+            candidate = self._finished(pair, best, stage_ms, until)
             if candidate is None:
                 logger.debug('branches %s cannot beat %.3f s; given up', pair.branches, best)
                 given_up.append(pair)
@@ -232,7 +238,7 @@ class Planner:
                 return self._result(candidate, checked, counts, dict(
                     stage_ms, total=(time.perf_counter() - begun) * 1000.0))
             # Every faster one failed verification: finish those given up after all.
-            candidates = [self._finished(pair, None, stage_ms) for pair in given_up]
+            candidates = [self._finished(pair, None, stage_ms, until) for pair in given_up]
             given_up = []
         raise failure
 
@@ -260,10 +266,11 @@ class Planner:
         return _Prepared(a, b, qa, qb, branches, roadmap_path, path,
                          len(corridor.control_points), draft)
 
-    def _finished(self, pair: '_Prepared', give_up_above, stage_ms) -> Optional['_Candidate']:
+    def _finished(self, pair: '_Prepared', give_up_above, stage_ms,
+                  until=None) -> Optional['_Candidate']:
         """Return the finished curve, not yet verified; None if it cannot win."""
         clock = _Clock(stage_ms)
-        shaped = self.method.finish(pair.draft, give_up_above)
+        shaped = self.method.finish(pair.draft, give_up_above, until)
         clock.lap('optimise')
         return None if shaped is None else _Candidate(pair, shaped)
 
@@ -292,10 +299,8 @@ class Planner:
             joint_path_length=float(np.linalg.norm(np.diff(dense, axis=0), axis=1).sum()),
             wafer_path_length=float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()),
             **counts)
-        # Samples every sample_period, then the exact final point.
-        times = np.arange(0.0, trajectory.duration - 1e-9, self.settings.sample_period)
-        times = np.append(times, trajectory.duration)
-        positions, velocities, accelerations = trajectory.evaluate_orders(times)
+        times, positions, velocities, accelerations = trajectory.samples(
+            self.settings.sample_period)
         return PlanResult(
             start=pair.a, goal=pair.b, start_q=pair.qa, goal_q=pair.qb, branches=pair.branches,
             trajectory=trajectory, initial_cycle_time=candidate.shaped.initial_cycle_time,

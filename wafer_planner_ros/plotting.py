@@ -102,34 +102,39 @@ def plot_roadmap(cell, roadmap, path, max_edges: int = 3000, seed: int = 0) -> N
 def plot_trajectory(cell, result, path, outlines: int = 14) -> None:
     """Write a PNG of a plan like the paper's Figs. 10-13: motion, joints, wafer."""
     t = np.linspace(0.0, result.cycle_time, 1500)
-    q, qd, qdd = result.trajectory.evaluate_orders(t)
+    q, qd, qdd, qddd = result.trajectory.evaluate_orders(t, range(4))
     plot_motion(cell, t, q, qd, qdd,
                 f'{result.start.label} -> {result.goal.label}: cycle time '
                 f'{result.cycle_time:.3f} s (λ-scaled {result.initial_cycle_time:.3f} s), '
-                f'branches {list(result.branches)}', path, outlines)
+                f'branches {list(result.branches)}', path, outlines, qddd=qddd)
 
 
 def plot_motion(cell, times, q, qd, qdd, title: str, path, outlines: int = 14,
-                dpi: int = 100) -> None:
+                dpi: int = 100, qddd=None) -> None:
     """
     Write a PNG of a sampled motion like the paper's Figs. 10-13.
 
     The enclosure with the robot's outline at ``outlines`` instants and the wafer-centre
-    trace; joint position, velocity and acceleration against their limits; the wafer
+    trace; joint position, velocity, acceleration and jerk against their limits; the wafer
     acceleration along x and y against its limit. ``times`` (N,) s; ``q``, ``qd``, ``qdd``
-    (N, J) in the robot's joint order. ``title`` is shown as it is (no mathtext).
+    (N, J) in the robot's joint order; ``qddd`` the jerk, or None to difference it from the
+    accelerations (samples of a recording). ``title`` is shown as it is (no mathtext).
     """
     robot = cell.robot
     times = np.asarray(times, float)
     q, qd, qdd = (np.asarray(values, float) for values in (q, qd, qdd))
+    jerk_label = 'jerk (rad/s³)'
+    if qddd is None:
+        qddd = np.gradient(qdd, times, axis=0) if len(times) > 1 else np.zeros_like(qdd)
+        jerk_label = 'jerk (rad/s³, from samples)'
     fig = Figure(figsize=(16, 9))
-    grid = fig.add_gridspec(3, 3, left=0.05, right=0.985, bottom=0.06, top=0.93,
-                            hspace=0.32, wspace=0.2)
-    ax = fig.add_subplot(grid[:2, :2])
+    grid = fig.add_gridspec(4, 3, left=0.05, right=0.985, bottom=0.06, top=0.93,
+                            hspace=0.36, wspace=0.2)
+    ax = fig.add_subplot(grid[:3, :2])
     _draw_motion(ax, cell, times, q, outlines)
     ax.set_title(_wrapped(title, 120, most=3), parse_math=False)
-    _draw_joints(fig, grid, robot, times, (q, qd, qdd))
-    _draw_wafer(fig.add_subplot(grid[2, :2]), robot, times,
+    _draw_joints(fig, grid, robot, times, (q, qd, qdd, np.asarray(qddd, float)), jerk_label)
+    _draw_wafer(fig.add_subplot(grid[3, :2]), robot, times,
                 robot.arm.wafer_acceleration(q, qd, qdd))
     fig.savefig(path, dpi=dpi)
 
@@ -179,20 +184,26 @@ def _draw_motion(ax, cell, times, q, outlines: int) -> None:
     ax.legend(loc='upper right')
 
 
-def _draw_joints(fig, grid, robot, times, series) -> None:
+def _draw_joints(fig, grid, robot, times, series, jerk_label: str) -> None:
     lower, upper = robot.limits.position.T
+    jerk = robot.limits.jerk
     panels = [('position (rad)', lower, upper),
               ('velocity (rad/s)', -robot.limits.velocity, robot.limits.velocity),
-              ('acceleration (rad/s²)', -robot.limits.acceleration, robot.limits.acceleration)]
+              ('acceleration (rad/s²)', -robot.limits.acceleration, robot.limits.acceleration),
+              (jerk_label, None if jerk is None else -jerk, jerk)]
     for row, (values, (label, low, high)) in enumerate(zip(series, panels)):
         axis = fig.add_subplot(grid[row, 2])
         handles = []
         for j, name in enumerate(robot.joint_names):
             line, = axis.plot(times, values[:, j], label=name)
             handles.append(line)
-            for bound in (low[j], high[j]):
+            for bound in () if high is None else (low[j], high[j]):
                 axis.axhline(bound, color=line.get_color(), linestyle='--', linewidth=0.8)
-        if row:
+        if row and high is None:
+            axis.text(0.01, 0.97, f'peak {_peak(np.abs(values)):.0f} rad/s³ (no limit)',
+                      transform=axis.transAxes, ha='left', va='top', fontsize=8,
+                      bbox={'facecolor': 'white', 'edgecolor': 'none', 'pad': 1.5})
+        elif row:
             axis.text(0.01, 0.97, f'peak {_peak(np.abs(values) / high):.1%} of limit',
                       transform=axis.transAxes, ha='left', va='top', fontsize=8,
                       bbox={'facecolor': 'white', 'edgecolor': 'none', 'pad': 1.5})

@@ -27,10 +27,13 @@ def plan_json(result, roadmap_info: dict, joint_names) -> dict:
 
 def measured(result) -> dict:
     """Return what was measured of a plan: the verification's figures and the metrics."""
-    checked = result.verification
+    checked, proof = result.verification, result.verification.proof
     return dict(result.metrics, min_clearance=checked.min_clearance,
                 limit_ratios=dict(checked.ratios), peak_jerk=list(checked.peak_jerk),
-                limit_checks=checked.limit_samples, collision_checks=checked.collision_samples)
+                peak_wafer_jerk=checked.peak_wafer_jerk,
+                limit_checks=checked.limit_samples, collision_checks=checked.collision_samples,
+                certified=proof.certified, proof_pieces=proof.pieces, proof_depth=proof.depth,
+                proof_evaluations=proof.evaluations)
 
 
 def error_json(code: str, message: str, start, goal, roadmap_info: dict) -> dict:

@@ -79,18 +79,19 @@ def run(main, argv=None) -> int:
 
 
 class Progress:
-    """Show ``label: done/total nodes, edges`` on stderr while a roadmap builds."""
+    """Show ``label: done/total nodes, edges`` on stderr while a roadmap (or table) builds."""
 
-    def __init__(self, label: str, stream=None):
+    def __init__(self, label: str, stream=None,
+                 text: str = '{done}/{total} nodes, {extra} edges'):
         """Print to ``stream`` (stderr); on a terminal one line is rewritten in place."""
-        self.label, self.stream = label, stream or sys.stderr
+        self.label, self.stream, self.text = label, stream or sys.stderr, text
         self.tty = self.stream.isatty()
         self.shown = False
         self.last_decile = -1
 
-    def __call__(self, done: int, total: int, edges: int) -> None:
+    def __call__(self, done: int, total: int, extra) -> None:
         """Report progress; off a terminal, print at every tenth of the way."""
-        line = f'{self.label}: {done}/{total} nodes, {edges} edges'
+        line = f'{self.label}: ' + self.text.format(done=done, total=total, extra=extra)
         if self.tty:
             self.stream.write('\r' + line)
         else:

@@ -1,16 +1,20 @@
 """``wafer-plan``: plan a verified, time-optimised trajectory between stations or angles."""
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 import sys
 
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_FAILURE, EXIT_OK
-from wafer_planner_ros.cli.common import load_cell, roadmap_for, run, UsageError, write_json
+from wafer_planner_ros.cli.common import load_cell, Progress, roadmap_for, run, UsageError
+from wafer_planner_ros.cli.common import write_json
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import error_json, plan_json, roadmap_json
 from wafer_planner_ros.service.requests import end_of_text
+from wafer_planner_ros.service.table import load_or_build_table, load_table, TableError
+from wafer_planner_ros.trajectory.methods import METHODS
 
 
 def parse_end(text: str):
@@ -21,19 +25,47 @@ def parse_end(text: str):
         raise UsageError(str(exc)) from None
 
 
-def plan_one(planner, start, goal, info, joint_names) -> tuple:
-    """Return (result or None, JSON object) for one request."""
+def plan_one(planner, start, goal, info, joint_names, stations=None) -> tuple:
+    """Return (result or None, JSON object) for one request; from ``stations`` if it has it."""
     try:
-        result = planner.plan(start, goal)
+        result = None
+        if stations is not None and isinstance(start, str) and isinstance(goal, str):
+            result = stations.answer(planner, start, goal)
+        if result is None:
+            result = planner.plan(start, goal)
     except PlanningError as exc:
         return None, error_json(exc.code.value, exc.message, start, goal, info)
     return result, plan_json(result, info, joint_names)
 
 
+def station_table(args, planner, quiet: bool):
+    """
+    Return the station table for whole-curve plans: cached, or built for --all-pairs.
+
+    A single pair is answered from a cached table when there is one and planned on its own
+    otherwise (building the whole table for one pair would take the time of all of them).
+    """
+    if planner.settings.method != 'whole-curve':
+        return None
+    cache_dir = None if args.no_cache else args.cache_dir
+    if not args.all_pairs:
+        try:
+            return None if cache_dir is None else load_table(planner, cache_dir)
+        except TableError:
+            return None
+    progress = None if quiet else Progress('planning the station table',
+                                           text='{done}/{total} pairs ({extra})')
+    stations = load_or_build_table(planner, cache_dir, progress)
+    if progress is not None:
+        progress.done()
+    return stations
+
+
 def table(rows: list) -> str:
     """Return the --all-pairs table."""
     lines = [f"{'pair':<24}{'status':<8}{'cycle s':>8}{'λ-scaled s':>11}{'gain':>7}"
-             f"{'path rad':>9}{'clear mm':>9}{'vel':>6}{'acc':>6}{'wafer':>7}{'ms':>8}"]
+             f"{'path rad':>9}{'clear mm':>9}{'vel':>6}{'acc':>6}{'wafer':>7}"
+             f"{'jerk rad/s³':>12}{'ms':>9}"]
     for row in rows:
         pair = f"{row['from']}->{row['to']}"
         if row['status'] != 'ok':
@@ -46,7 +78,7 @@ def table(rows: list) -> str:
             f"{1 - row['cycle_time'] / row['initial_cycle_time']:>7.0%}"
             f"{m['joint_path_length']:>9.2f}{m['min_clearance'] * 1000:>9.1f}"
             f"{r['velocity']:>6.2f}{r['acceleration']:>6.2f}{wafer:>7.3f}"
-            f"{row['timings_ms']['total']:>8.1f}")
+            f"{max(m['peak_jerk']):>12.0f}{row['timings_ms']['total']:>9.1f}")
     return '\n'.join(lines)
 
 
@@ -62,6 +94,10 @@ def main(argv=None) -> int:
                         help='seconds between returned samples (default: %(default)s)')
     parser.add_argument('--paper', action='store_true',
                         help="the paper's exact pipeline (no shortcuts, Eq. 3 boxes)")
+    parser.add_argument('--method', choices=sorted(METHODS), default=PlannerSettings.method,
+                        help='how the curve is shaped and timed: the corridor curve with '
+                        'optimised knot times, or the whole curve optimised and proven '
+                        '(default: %(default)s)')
     parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
     parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
     args = parser.parse_args(argv)
@@ -70,8 +106,8 @@ def main(argv=None) -> int:
     if not args.all_pairs and args.goal is None:
         raise UsageError('give both FROM and TO')
     try:
-        settings = (PlannerSettings.paper if args.paper else PlannerSettings)(
-            sample_period=args.sample_period)
+        settings = replace((PlannerSettings.paper if args.paper else PlannerSettings)(
+            sample_period=args.sample_period), method=args.method)
     except ValueError as exc:
         raise UsageError(f'--sample-period: {exc}') from None
     requests = None if args.all_pairs else [(parse_end(args.start), parse_end(args.goal))]
@@ -80,8 +116,9 @@ def main(argv=None) -> int:
     planner = Planner(cell, cached.roadmap, settings)
     info = roadmap_json(cached)
     results, rows = [], []
+    stations = station_table(args, planner, quiet=args.json == '-')
     for start, goal in requests or station_pairs(cell):
-        result, row = plan_one(planner, start, goal, info, cell.robot.joint_names)
+        result, row = plan_one(planner, start, goal, info, cell.robot.joint_names, stations)
         results.append(result)
         rows.append(row)
     if args.json:
@@ -104,6 +141,10 @@ def _summary(row: dict) -> str:
             f"roadmap), joint length {m['joint_path_length']:.2f} rad, wafer travel "
             f"{m['wafer_path_length']:.3f} m, min clearance {m['min_clearance'] * 1000:.1f} mm\n"
             f'  limit ratios: {ratios}\n'
+            f"  peak jerk {', '.join(f'{v:.0f}' for v in m['peak_jerk'])} rad/s³ (joints), "
+            f"wafer {m['peak_wafer_jerk']:.1f} m/s³; "
+            + ('proven collision-free' if m['certified'] else 'NOT proven collision-free')
+            + f" ({m['proof_pieces']} pieces, depth {m['proof_depth']})\n"
             f"  planning {row['timings_ms']['total']:.1f} ms: "
             + ', '.join(f'{k} {v:.1f}' for k, v in row['timings_ms'].items() if k != 'total'))
 

@@ -5,7 +5,9 @@ wafer-replay: re-plan the queries of a recording, or send them to a running node
 roadmap size and seed, and the parameters in force when it arrived, and prints the recorded
 and replayed answer and cycle time of each query. Exit 1 when any differs (code, or cycle
 time by more than ``--tolerance``). Answers that depended on the node's load at the time
-(BUSY, TIMEOUT, ROADMAP_NOT_READY) are listed but not replayed. ``--publish`` sends the
+(BUSY, TIMEOUT, ROADMAP_NOT_READY) or on a time budget (``planning.optimise_budget``) are
+listed but not replayed; an answer from the station table is re-planned with the
+whole-curve optimisation that made the table. ``--publish`` sends the
 recorded requests to a running node at their recorded pace and compares its answers.
 """
 
@@ -34,16 +36,24 @@ class Replayer:
         self._planners = {}
 
     def planner(self, query: Query) -> Planner:
-        """Return the planner of the roadmap the query was answered on (it has one)."""
+        """
+        Return the planner of the roadmap the query was answered on (it has one).
+
+        It uses the curve method the answer names (from the station table or the budgeted
+        optimisation: ``whole-curve``; else the corridor curve).
+        """
         load = query.load
         period = float(query.parameters.get('trajectory.sample_period', 0.01))
+        values = query.result.values if query.result is not None else {}
+        method = values.get('method') or PlannerSettings.method
         key = (load.cell_text, load.values.get('roadmap_nodes'),
                load.values.get('roadmap_seed'))
         if key not in self._planners:
             self._planners[key] = self._load(load)
         planner = self._planners[key]
-        if planner.settings.sample_period != period:
-            planner = Planner(planner.cell, planner.roadmap, PlannerSettings(sample_period=period))
+        if planner.settings.sample_period != period or planner.settings.method != method:
+            planner = Planner(planner.cell, planner.roadmap,
+                              PlannerSettings(sample_period=period, method=method))
         return planner
 
     def _load(self, load) -> Planner:
@@ -73,6 +83,9 @@ class Replayer:
         """
         if query.code in NODE_ONLY_CODES:
             return '', None
+        values = query.result.values if query.result is not None else {}
+        if float(values.get('budget') or 0.0) > 0.0:
+            return '', None  # the optimisation stopped when its time was up
         try:
             if query.load is None:  # only a station request can be read without the cell
                 if query.kind != 'station':

@@ -10,6 +10,8 @@ zero. Because the arm is a chain from the shoulder,
 which the cell model requires to be in free space, a body cannot leave the boundary or enter
 an obstacle without crossing an edge, so edge distances decide collision exactly. This is
 the fast path used to build the roadmap; ``fcl_model`` is the reference it is tested against.
+``ClearanceModel.body_clearance_gradient`` adds each body's clearance gradient with respect to
+the joint angles, for the constraints of a trajectory optimiser.
 """
 
 from dataclasses import dataclass
@@ -110,6 +112,35 @@ class ClearanceModel:
         clearance[~np.isfinite(q.reshape(-1, 3)).all(axis=1)] = -np.inf
         return clearance
 
+    def body_clearance_gradient(self, q: np.ndarray) -> tuple:
+        """
+        Return each body's clearance (N, 4) and its gradient d clearance / d q (N, 4, 3).
+
+        The clearance equals ``body_clearance(q)`` exactly; the margin shifts it and leaves
+        the gradient alone. The gradient is that of the nearest edge's witness pair (the
+        envelope theorem): with p the nearest point of the body's spine and n the unit vector
+        from the edge's nearest point to p, the entry of joint i is n . (z x (p - joint_i))
+        for the joints that move the body, and 0 for the joints beyond it.
+
+        It is the gradient of a minimum, so it is not defined everywhere; there it is
+        - the gradient of the first nearest edge (in polygon order) and witness pair where
+          two of them tie: a one-sided gradient, exact again once the tie is left;
+        - 0 where the spine touches or crosses an edge (distance zero, clearance equal to
+          minus the radius), which is a collision anyway;
+        - 0, with clearance -inf, where the configuration is not finite.
+        """
+        q = np.asarray(q, dtype=float)
+        distance, gradient = _spine_distance_gradients(
+            np.ascontiguousarray(np.atleast_2d(q)), np.asarray(self.arm.base, float),
+            np.asarray(self.arm.link_lengths, float), self.edge_start, self.edge_end,
+            self._edge_len_sq, self._base_dist)
+        clearance = distance - self.radii
+        # As in body_clearance: a configuration that is not finite is nowhere.
+        finite = np.isfinite(q.reshape(-1, 3)).all(axis=1)
+        clearance[~finite] = -np.inf
+        gradient[~finite] = 0.0
+        return clearance, gradient
+
     def _distances(self, q: np.ndarray, per_edge: bool) -> np.ndarray:
         q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=float)))
         out = _spine_distances(q, np.asarray(self.arm.base, float),
@@ -149,41 +180,124 @@ def _spine_distances(q, base, link_lengths, edge_start, edge_end, edge_len_sq, b
     out = np.empty((len(q), 4, edges if per_edge else 1))
     x, y = np.empty(4), np.empty(4)
     for n in range(len(q)):
-        x[0], y[0] = base[0], base[1]
-        theta, cx_, cy_ = 0.0, 0.0, 0.0
-        for j in range(3):  # joint points: base + cumulative link vectors
-            theta += q[n, j]
-            cx_ += link_lengths[j] * np.cos(theta)
-            cy_ += link_lengths[j] * np.sin(theta)
-            x[j + 1], y[j + 1] = base[0] + cx_, base[1] + cy_
+        _joint_points(q[n], base, link_lengths, x, y)
         out[n] = np.inf
         for e in range(edges):
             cx, cy = edge_start[e, 0], edge_start[e, 1]
             dx, dy = edge_end[e, 0], edge_end[e, 1]
-            ex, ey = dx - cx, dy - cy
             start = base_dist[e]
             column = e if per_edge else 0
             for j in range(3):
-                ax, ay, bx, by = x[j], y[j], x[j + 1], y[j + 1]
-                # The link's far end to the edge.
-                s = min(max(((bx - cx) * ex + (by - cy) * ey) / edge_len_sq[e], 0.0), 1.0)
-                px, py = bx - cx - s * ex, by - cy - s * ey
-                end = np.sqrt(px * px + py * py)
-                gap = min(end, start)
-                # The edge's two vertices to the link.
-                abx, aby = bx - ax, by - ay
-                ab2 = max(abx * abx + aby * aby, 1e-300)
-                for vx, vy in ((cx, cy), (dx, dy)):
-                    t = min(max(((vx - ax) * abx + (vy - ay) * aby) / ab2, 0.0), 1.0)
-                    wx, wy = vx - ax - t * abx, vy - ay - t * aby
-                    gap = min(gap, np.sqrt(wx * wx + wy * wy))
-                side_c = abx * (cy - ay) - aby * (cx - ax)
-                side_d = abx * (dy - ay) - aby * (dx - ax)
-                side_a = ex * (ay - cy) - ey * (ax - cx)
-                side_b = ex * (by - cy) - ey * (bx - cx)
-                if side_c * side_d <= 0.0 and side_a * side_b <= 0.0:
-                    gap = 0.0
+                # The witness outputs are not used here: the compiler drops their arithmetic.
+                gap, end = _link_to_edge(x[j], y[j], x[j + 1], y[j + 1], cx, cy, dx, dy,
+                                         edge_len_sq[e], start, 0.0, 0.0)[:2]
                 out[n, j, column] = min(out[n, j, column], gap)
                 start = end
             out[n, 3, column] = min(out[n, 3, column], start)  # the wafer centre
     return out
+
+
+@njit(cache=True, nogil=True)
+def _spine_distance_gradients(q, base, link_lengths, edge_start, edge_end, edge_len_sq,
+                              base_dist):
+    """
+    Return each body's spine distance to the nearest edge (N, 4) and its gradient (N, 4, 3).
+
+    The distances are those of ``_spine_distances``, by the same operations in the same
+    order, so bit for bit. For the nearest edge of each body, with the witness pair of
+    ``_link_to_edge`` (p on the body's spine at a fixed parameter along its link, u = p minus
+    the edge's point), the envelope theorem gives d distance / d q_i = (u / |u|) .
+    (z x (p - joint_i)) for the joints i up to the body's own link (the wafer moves with
+    all three) and 0 for later joints. Where the distance is zero (the spine touches or
+    crosses an edge) the gradient is not defined and is left at 0.
+    """
+    edges = len(edge_start)
+    dist = np.empty((len(q), 4))
+    grad = np.zeros((len(q), 4, 3))
+    x, y = np.empty(4), np.empty(4)
+    best = np.empty(4)  # per body, the nearest witness so far: distance, p and u
+    best_px, best_py = np.empty(4), np.empty(4)
+    best_ux, best_uy = np.empty(4), np.empty(4)
+    for n in range(len(q)):
+        _joint_points(q[n], base, link_lengths, x, y)
+        dist[n] = np.inf
+        best[:] = np.inf
+        for e in range(edges):
+            cx, cy = edge_start[e, 0], edge_start[e, 1]
+            dx, dy = edge_end[e, 0], edge_end[e, 1]
+            start = base_dist[e]
+            # The base does not move, so the direction of its offset does not matter.
+            start_ux, start_uy = 0.0, 0.0
+            for j in range(3):
+                gap, end, end_ux, end_uy, near, near_px, near_py, near_ux, near_uy = (
+                    _link_to_edge(x[j], y[j], x[j + 1], y[j + 1], cx, cy, dx, dy,
+                                  edge_len_sq[e], start, start_ux, start_uy))
+                dist[n, j] = min(dist[n, j], gap)
+                if near < best[j]:
+                    best[j], best_px[j], best_py[j] = near, near_px, near_py
+                    best_ux[j], best_uy[j] = near_ux, near_uy
+                start, start_ux, start_uy = end, end_ux, end_uy
+            dist[n, 3] = min(dist[n, 3], start)  # the wafer centre
+            if start < best[3]:
+                best[3], best_px[3], best_py[3] = start, x[3], y[3]
+                best_ux[3], best_uy[3] = start_ux, start_uy
+        for k in range(4):
+            if not 0.0 < best[k] < np.inf:
+                continue  # touching or crossing, or not finite: no gradient
+            nx, ny = best_ux[k] / best[k], best_uy[k] / best[k]
+            for i in range(min(k, 2) + 1):  # z x (p - joint_i), dotted with n
+                grad[n, k, i] = (best_px[k] - x[i]) * ny - (best_py[k] - y[i]) * nx
+    return dist, grad
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _joint_points(q, base, link_lengths, x, y):
+    """Write base, elbow, wrist and wafer centre of one configuration (3,) into x, y (4,)."""
+    x[0], y[0] = base[0], base[1]
+    theta, cx_, cy_ = 0.0, 0.0, 0.0
+    for j in range(3):  # joint points: base + cumulative link vectors
+        theta += q[j]
+        cx_ += link_lengths[j] * np.cos(theta)
+        cy_ += link_lengths[j] * np.sin(theta)
+        x[j + 1], y[j + 1] = base[0] + cx_, base[1] + cy_
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _link_to_edge(ax, ay, bx, by, cx, cy, dx, dy, edge_len_sq, start, start_ux, start_uy):
+    """
+    Return the distance of link a-b to edge c-d, with the witness pair of its nearest points.
+
+    ``start`` is the distance of the near end a to the edge (the previous link's far end)
+    and (start_ux, start_uy) its offset from the edge's nearest point. Returns (gap, end,
+    end_ux, end_uy, near, near_px, near_py, near_ux, near_uy): the distance (0 when the link
+    crosses the edge), the far end b's distance and offset, and the nearest candidate's
+    distance ``near`` (equal to ``gap``), its point p on the link and the offset u of p from
+    the edge's point.
+    """
+    ex, ey = dx - cx, dy - cy
+    # The link's far end to the edge.
+    s = min(max(((bx - cx) * ex + (by - cy) * ey) / edge_len_sq, 0.0), 1.0)
+    px, py = bx - cx - s * ex, by - cy - s * ey
+    end = np.sqrt(px * px + py * py)
+    gap = min(end, start)
+    if end <= start:
+        near, near_px, near_py, near_ux, near_uy = end, bx, by, px, py
+    else:
+        near, near_px, near_py, near_ux, near_uy = start, ax, ay, start_ux, start_uy
+    # The edge's two vertices to the link.
+    abx, aby = bx - ax, by - ay
+    ab2 = max(abx * abx + aby * aby, 1e-300)
+    for vx, vy in ((cx, cy), (dx, dy)):
+        t = min(max(((vx - ax) * abx + (vy - ay) * aby) / ab2, 0.0), 1.0)
+        wx, wy = vx - ax - t * abx, vy - ay - t * aby
+        vertex = np.sqrt(wx * wx + wy * wy)
+        gap = min(gap, vertex)
+        if vertex < near:
+            near, near_px, near_py, near_ux, near_uy = vertex, ax + t * abx, ay + t * aby, -wx, -wy
+    side_c = abx * (cy - ay) - aby * (cx - ax)
+    side_d = abx * (dy - ay) - aby * (dx - ax)
+    side_a = ex * (ay - cy) - ey * (ax - cx)
+    side_b = ex * (by - cy) - ey * (bx - cx)
+    if side_c * side_d <= 0.0 and side_a * side_b <= 0.0:
+        gap = near = 0.0
+    return gap, end, px, py, near, near_px, near_py, near_ux, near_uy

@@ -77,6 +77,22 @@ class PlanarArm:
         ax, ay = _wafer_acceleration_many(np.asarray(self.link_lengths, float), q, qd, qdd)
         return ax.reshape(shape[:-1]), ay.reshape(shape[:-1])
 
+    def wafer_jerk(self, q, qd, qdd, qddd) -> np.ndarray:
+        """
+        Return the wafer-centre jerk (m/s^3) for (q, qd, qdd, qddd), shape (..., 2).
+
+        With th_j, w_j, a_j, z_j the cumulative joint angles, velocities, accelerations and
+        jerks: p''' = sum_j l_j ((z_j - w_j^3) (-sin th_j, cos th_j)
+        - 3 w_j a_j (cos th_j, sin th_j)).
+        """
+        theta, omega, alpha, zeta = (np.cumsum(np.asarray(x, float), axis=-1)
+                                     for x in (q, qd, qdd, qddd))
+        c, s = np.cos(theta), np.sin(theta)
+        turn = self.link_lengths * (zeta - omega ** 3)
+        pull = 3.0 * self.link_lengths * omega * alpha
+        return np.stack([np.sum(-turn * s - pull * c, axis=-1),
+                         np.sum(turn * c - pull * s, axis=-1)], axis=-1)
+
     def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:
         """
         Return the IK branches placing the wafer centre at ``wafer_center`` with ``heading``.

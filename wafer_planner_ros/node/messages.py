@@ -1,5 +1,6 @@
 """Messages the node publishes, built from the core's results (SPEC section 5)."""
 
+import enum
 import json
 from typing import Mapping, Optional, Sequence
 
@@ -10,6 +11,19 @@ from wafer_planner_ros.service.requests import end_label
 
 LEVELS = {'ok': ord(DiagnosticStatus.OK), 'warn': ord(DiagnosticStatus.WARN),
           'error': ord(DiagnosticStatus.ERROR)}
+
+
+class Sent(enum.Enum):
+    """What the worker hands the executor to publish: (kind, message, query number)."""
+
+    ANSWER = enum.auto()
+    """(trajectory, result): recorded together, then published in that order."""
+    RESULT = enum.auto()
+    """An error's result alone."""
+    MARKERS = enum.auto()
+    """The roadmap markers of a load (query number 0)."""
+    PATH = enum.auto()
+    """The path markers of an answer."""
 
 
 def trajectory(result, request_id: str, joint_names: Sequence[str], stamp) -> bytes:
@@ -57,7 +71,13 @@ def plan_values(result, roadmap, start, goal) -> dict:
     values.update({f'ratio_{name}': ratio
                    for name, ratio in result.verification.ratios.items()})
     values['min_clearance'] = result.min_clearance
+    values['peak_jerk'] = list(result.verification.peak_jerk)
+    values['peak_wafer_jerk'] = result.verification.peak_wafer_jerk
+    values['certified'] = result.verification.proof.certified
     values['branches'] = result.branches
+    values['method'] = result.metrics.get('method', '')
+    values['source'] = result.metrics.get('source', 'planned')
+    values['budget'] = result.metrics.get('budget', 0.0)
     return values
 
 

@@ -37,8 +37,9 @@ from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.errors import ErrorCode
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
+from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
-from wafer_planner_ros.node.worker import PlanningWorker, Sent
+from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
@@ -295,6 +296,8 @@ class WaferPlannerNode(Node):
                 level = DiagnosticStatus.WARN
                 message = (f"rebuild failed: {status['last_rebuild_error']}; serving the "
                            f"previous roadmap {status['hash'][:12]}")
+            elif status['busy_with'] == 'station_table':
+                message = 'ready; planning the station table'
             elif status['busy_with'] == 'load':
                 message = 'ready; rebuilding the roadmap'
         elif status['busy_with'] == 'load':
@@ -309,9 +312,10 @@ class WaferPlannerNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message += ('; recording stalled: the disk has not synced for 0.25 s, answers go '
                         'out before they are on it')
-        keys = ('ready', 'nodes', 'edges', 'hash', 'queue', 'served', 'failed',
-                'rebuild_failed', 'last_rebuild_error', 'recording', 'recording_directory',
-                'recording_error', 'recording_lost', 'answers_before_recorded')
+        keys = ('ready', 'nodes', 'edges', 'hash', 'station_table', 'queue', 'served',
+                'failed', 'rebuild_failed', 'last_rebuild_error', 'recording',
+                'recording_directory', 'recording_error', 'recording_lost',
+                'answers_before_recorded')
         health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
                                   message=message, hardware_id='wafer_planner',
                                   values=[KeyValue(key=k, value=str(status.get(k, '')))

@@ -3,14 +3,21 @@ A roadmap ready to serve: its planner, when it took over, and how it got there.
 
 The worker's loading thread builds or loads a roadmap (``progress_reporter`` logs the
 build), plans once with it (``warm_up``: the compiled kernels load before the first
-request), and hands it over as a ``Serving``.
+request), and hands it over as a ``Serving``; then it loads or plans the station table
+(``station_table``). ``plan_request`` chooses how a request is answered: a station pair
+from the table when it holds it; a station pair it does not hold (yet) by the corridor
+curve, which takes milliseconds; anything else by the whole-curve optimisation within
+``planning.optimise_budget`` seconds.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+import time
+from typing import Optional
 
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
+from wafer_planner_ros.service.table import load_or_build_table, StationTable
 
 
 @dataclass(frozen=True)
@@ -32,6 +39,43 @@ def progress_reporter(logger):
             last[0] = tenth
             logger.info(f'building roadmap: {done}/{total} nodes, {edges} edges')
     return report
+
+
+def station_table(planner: Planner, settings, logger) -> Optional[StationTable]:
+    """Return the station table of a serving planner (loaded, or planned and stored)."""
+    if not settings.station_table:
+        return None
+    whole = Planner(planner.cell, planner.roadmap,
+                    replace(planner.settings, method='whole-curve'))
+    begun = time.monotonic()
+
+    def progress(done: int, total: int, pair: str) -> None:
+        logger.info(f'station table: {done}/{total} pairs planned ({pair}, '
+                    f'{time.monotonic() - begun:.1f} s)')
+
+    table = load_or_build_table(whole, settings.cache_dir, progress)
+    for (start, goal), reason in sorted(table.failures.items()):
+        logger.warning(f'station table: {start} -> {goal} not planned: {reason}')
+    logger.info(f'station table ready: {len(table)} pairs, '
+                f'{"loaded" if table.loaded else "planned"} in {table.seconds:.2f} s')
+    return table
+
+
+def plan_request(planner: Planner, table: Optional[StationTable], request, settings,
+                 deadline: float):
+    """Return the answer to a request (see the module); raise PlanningError."""
+    stations = isinstance(request.start, str) and isinstance(request.goal, str)
+    if stations and table is not None:
+        result = table.answer(planner, request.start, request.goal)
+        if result is not None:
+            return result
+    if stations or settings.optimise_budget <= 0.0:
+        return planner.plan(request.start, request.goal, deadline=deadline)
+    whole = Planner(planner.cell, planner.roadmap,
+                    replace(planner.settings, method='whole-curve'))
+    result = whole.plan(request.start, request.goal, deadline=deadline,
+                        budget=settings.optimise_budget)
+    return replace(result, metrics=dict(result.metrics, budget=settings.optimise_budget))
 
 
 def warm_up(planner) -> None:

@@ -14,7 +14,6 @@ happens: a failure of the node itself is answered ``INTERNAL`` with the reason.
 """
 
 from collections import deque
-import enum
 import gc
 import threading
 import time
@@ -27,8 +26,10 @@ from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
 from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
+from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import progress_reporter, Serving, warm_up
+from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving
+from wafer_planner_ros.node.serving import station_table, warm_up
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
@@ -37,19 +38,6 @@ from wafer_planner_ros.service.settings import NodeSettings
 PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
-
-
-class Sent(enum.Enum):
-    """What the worker hands the executor to publish: (kind, message, query number)."""
-
-    ANSWER = enum.auto()
-    """(trajectory, result): recorded together, then published in that order."""
-    RESULT = enum.auto()
-    """An error's result alone."""
-    MARKERS = enum.auto()
-    """The roadmap markers of a load (query number 0)."""
-    PATH = enum.auto()
-    """The path markers of an answer."""
 
 
 class PlanningWorker:
@@ -78,6 +66,8 @@ class PlanningWorker:
         self._serving: Optional[Serving] = None
         self._previous: Optional[Serving] = None
         """The roadmap before the serving one, for requests received before it took over."""
+        self._table, self._tabling = (None, None), False
+        """(loaded_ns of the serving roadmap it belongs to, its station table); building it."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
@@ -196,7 +186,8 @@ class PlanningWorker:
             cell = serving.planner.cell if serving is not None else self._loading_cell
             return {
                 'ready': serving is not None,
-                'busy_with': 'load' if self._loading else 'plan' if self._planning else None,
+                'busy_with': 'station_table' if self._tabling else 'load' if self._loading
+                else 'plan' if self._planning else None,
                 'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
                 'edges': roadmap.edge_count if roadmap is not None else 0,
@@ -207,6 +198,8 @@ class PlanningWorker:
                 'last_error': self.last_error,
                 'rebuild_failed': self.load_failed,
                 'last_rebuild_error': self.last_load_error,
+                'station_table': len(self._table[1]) if self._table[1] is not None and
+                serving is not None and self._table[0] == serving.loaded_ns else 0,
             }
 
     def request_stop(self) -> None:
@@ -281,9 +274,10 @@ class PlanningWorker:
                 planner = Planner(planner.cell, planner.roadmap,
                                   PlannerSettings(sample_period=settings.sample_period))
             begun = time.monotonic()
+            table = self._table[1] if self._table[0] == serving.loaded_ns else None
             try:
-                result = planner.plan(request.start, request.goal,
-                                      deadline=received + settings.timeout)
+                result = plan_request(planner, table, request, settings,
+                                      received + settings.timeout)
             except PlanningError as exc:
                 self.answer_error(number, request.request_id, exc.code, exc.message,
                                   request.start, request.goal,
@@ -384,6 +378,13 @@ class PlanningWorker:
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
             f'(ready {time.monotonic() - started:.2f} s after loading began)')
+        self._tabling = True
+        try:
+            self._table = (loaded_ns, station_table(planner, settings, self._logger))
+        except Exception as exc:  # noqa: B902 - the roadmap serves without its table
+            self._logger.error(f'station table not planned: {reason_of(exc)}')
+        finally:
+            self._tabling = False
 
     def _load_failed(self, exc: Exception, cell_file=None) -> None:
         """Say why the load failed; the serving roadmap, if any, serves on."""

@@ -40,6 +40,13 @@ PARAMETERS: Tuple[Parameter, ...] = (
               *SAMPLE_PERIOD_RANGE),
     Parameter('planning.timeout', 2.0,
               'seconds from receipt after which a request is answered TIMEOUT', 0.01, 600.0),
+    Parameter('planning.station_table', True,
+              'plan every loadport-loadlock pair with the whole-curve optimisation once the '
+              'roadmap is loaded (kept in the cache directory) and answer them from it'),
+    Parameter('planning.optimise_budget', 0.5,
+              'seconds the whole-curve optimisation may spend on a request the station table '
+              'does not hold (the best proven curve by then is returned); 0: the corridor '
+              'curve only', 0.0, 600.0),
     Parameter('planning.max_queue', 32,
               'requests waiting to be planned; more are answered BUSY', 1, 10000),
     Parameter('recording.enabled', True, 'record every query to MCAP'),
@@ -62,6 +69,8 @@ class NodeSettings:
     """None: the cache is disabled."""
     sample_period: float
     timeout: float
+    station_table: bool
+    optimise_budget: float
     max_queue: int
     recording_enabled: bool
     recording_directory: Path
@@ -100,6 +109,8 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         cache_dir=Path(cache).expanduser() if cache else None,
         sample_period=float(merged['trajectory.sample_period']),
         timeout=float(merged['planning.timeout']),
+        station_table=merged['planning.station_table'],
+        optimise_budget=float(merged['planning.optimise_budget']),
         max_queue=merged['planning.max_queue'],
         recording_enabled=merged['recording.enabled'],
         recording_directory=Path(merged['recording.directory']).expanduser(),

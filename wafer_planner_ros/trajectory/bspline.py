@@ -190,27 +190,32 @@ class CubicBSpline(Trajectory):
             out.append(values)
         return tuple(out)
 
-    def peak_speed(self, subdivisions: int = 8) -> tuple:
-        """
-        Return (boundaries, peaks): each span cut into ``subdivisions`` equal pieces.
+    def breaks(self) -> np.ndarray:
+        """Return the knot times 0 = t_3 < ... < t_{n+1} = T between the spans."""
+        return self.knots[DEGREE:-DEGREE]
 
-        ``boundaries`` (S + 1,) are the pieces' times and ``peaks`` (S, 3) the exact largest
-        |q'_j| on each: q' is a quadratic on a span, so its extreme on a piece is at an end
-        or where q'' = 0.
+    def peak_speed(self, a, b) -> np.ndarray:
+        """
+        Return the exact largest |q'_j| on each [a_k, b_k] (K, 3), each within one span.
+
+        q' is a quadratic on a span, so its extreme on an interval is at an end or where
+        q'' = 0.
         """
         starts, coefficients = self._pieces
-        steps = np.arange(subdivisions + 1) / subdivisions
-        tau = steps[None, :, None] * self.intervals[:, None, None]          # (m, P + 1, 1)
-        c1, c2, c3 = (coefficients[:, None, k] for k in (1, 2, 3))          # (m, 1, 3)
-        speed = np.abs(c1 + tau * (2.0 * c2 + 3.0 * c3 * tau))               # (m, P + 1, 3)
-        peaks = np.maximum(speed[:, :-1], speed[:, 1:])
+        a, b = np.atleast_1d(np.asarray(a, float)), np.atleast_1d(np.asarray(b, float))
+        span = np.clip(np.searchsorted(starts, 0.5 * (a + b), side='right') - 1, 0,
+                       len(starts) - 1)
+        c1, c2, c3 = (coefficients[span, k] for k in (1, 2, 3))                # (K, 3)
+        low, high = (a - starts[span])[:, None], (b - starts[span])[:, None]
+
+        def speed(tau):
+            return np.abs(c1 + tau * (2.0 * c2 + 3.0 * c3 * tau))
+
+        peaks = np.maximum(speed(low), speed(high))
         with np.errstate(divide='ignore', invalid='ignore'):
-            turn = np.where(c3 != 0.0, -c2 / (3.0 * c3), -1.0)               # q'' = 0
-        inside = (turn > tau[:, :-1]) & (turn < tau[:, 1:])
-        extreme = np.abs(c1 + turn * (2.0 * c2 + 3.0 * c3 * turn))
-        peaks = np.where(inside, np.maximum(peaks, extreme), peaks)
-        boundaries = (starts[:, None] + tau[:, :-1, 0]).ravel()
-        return np.append(boundaries, self.duration), peaks.reshape(-1, 3)
+            turn = np.where(c3 != 0.0, -c2 / (3.0 * c3), -np.inf)              # q'' = 0
+        inside = (turn > low) & (turn < high)
+        return np.where(inside, np.maximum(peaks, speed(np.where(inside, turn, low))), peaks)
 
     def describe(self) -> dict:
         """Return the degree, the knots and the control points."""

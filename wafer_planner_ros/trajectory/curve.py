@@ -29,13 +29,34 @@ class Trajectory(ABC):
         return self.evaluate_orders(t, (order,))[0]
 
     @abstractmethod
-    def peak_speed(self, subdivisions: int = 8) -> Tuple[np.ndarray, np.ndarray]:
+    def breaks(self) -> np.ndarray:
+        """Return the times (S + 1,) between the curve's polynomial pieces, 0 to T."""
+
+    @abstractmethod
+    def peak_speed(self, a, b) -> np.ndarray:
+        """
+        Return the exact largest |q'_j| of every joint on each interval [a_k, b_k], (K, J).
+
+        Each interval lies within one polynomial piece (between two ``breaks``).
+        """
+
+    def pieces(self, subdivisions: int = 8) -> Tuple[np.ndarray, np.ndarray]:
         """
         Return (boundaries (S + 1,), peaks (S, J)): the curve in pieces and each one's peaks.
 
-        ``boundaries`` are the pieces' times (``subdivisions`` pieces per polynomial span),
-        ``peaks`` the exact largest |q'_j| of every joint on each piece.
+        Every polynomial piece is cut into ``subdivisions`` equal pieces; ``peaks`` are the
+        exact largest |q'_j| of every joint on each.
         """
+        breaks = self.breaks()
+        steps = np.arange(subdivisions) / subdivisions
+        boundaries = (breaks[:-1, None] + np.diff(breaks)[:, None] * steps).ravel()
+        boundaries = np.append(boundaries, breaks[-1])
+        return boundaries, self.peak_speed(boundaries[:-1], boundaries[1:])
+
+    def samples(self, period: float) -> Tuple[np.ndarray, ...]:
+        """Return (times, q, q', q''): every ``period`` seconds from 0, then the exact end."""
+        times = np.append(np.arange(0.0, self.duration - 1e-9, period), self.duration)
+        return (times, *self.evaluate_orders(times))
 
     @abstractmethod
     def describe(self) -> Mapping:

@@ -15,9 +15,10 @@ from typing import ClassVar, Mapping, Optional, Tuple
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.corridor import Corridor
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.shape import optimise_shape
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
-from wafer_planner_ros.trajectory.tuning import TimingSettings
+from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,18 +48,25 @@ class CurveMethod(ABC):
 
     name: ClassVar[str]
 
-    def __init__(self, cell, settings: TimingSettings):
-        """Keep the cell and the optimiser's tuning."""
+    def __init__(self, cell, settings: TimingSettings, shape: ShapeSettings = ShapeSettings()):
+        """Keep the cell and the optimisers' tuning."""
         self.cell = cell
         self.settings = settings
+        self.shape = shape
 
     @abstractmethod
     def draft(self, corridor: Corridor) -> Draft:
         """Return the starting point for a corridor."""
 
     @abstractmethod
-    def finish(self, draft: Draft, give_up_above: Optional[float] = None) -> Optional[Shaped]:
-        """Return the finished curve; None once it shows it cannot beat ``give_up_above`` s."""
+    def finish(self, draft: Draft, give_up_above: Optional[float] = None,
+               until: Optional[float] = None) -> Optional[Shaped]:
+        """
+        Return the finished curve; None once it shows it cannot beat ``give_up_above`` s.
+
+        ``until``: a ``time.monotonic()`` instant by which a method that improves a curve
+        step by step returns the best it has.
+        """
 
 
 class KnotTiming(CurveMethod):
@@ -77,7 +85,8 @@ class KnotTiming(CurveMethod):
         start = scaled_start(problem)
         return Draft(float(start[0].sum()), (problem, start))
 
-    def finish(self, draft: Draft, give_up_above: Optional[float] = None) -> Optional[Shaped]:
+    def finish(self, draft: Draft, give_up_above: Optional[float] = None,
+               until: Optional[float] = None) -> Optional[Shaped]:
         """Return the spline with optimised span durations (``timing.optimise``)."""
         problem, start = draft.work
         timing = optimise(problem, start, give_up_above)
@@ -92,5 +101,40 @@ class KnotTiming(CurveMethod):
                       draft.estimate, metrics, warnings)
 
 
-METHODS = {method.name: method for method in (KnotTiming,)}
+class WholeCurve(KnotTiming):
+    """
+    The control points move with the span durations (``shape.optimise_shape``).
+
+    The draft is the corridor curve with optimised knot times (``KnotTiming``: verified,
+    and near the answer, so SLSQP starts close; its cycle time orders the elbow-branch
+    combinations better than the λ-scaled start does); the curve returned is proven
+    collision-free on its own (``proof``), not by the corridor.
+    """
+
+    name = 'whole-curve'
+
+    def draft(self, corridor: Corridor) -> Draft:
+        """Return the corridor curve with optimised knot times."""
+        start = super().draft(corridor)
+        timed = super().finish(start)
+        return Draft(timed.trajectory.duration, (start.estimate, timed))
+
+    def finish(self, draft: Draft, give_up_above: Optional[float] = None,
+               until: Optional[float] = None) -> Optional[Shaped]:
+        """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
+        initial, timed = draft.work
+        shaped = optimise_shape(timed.trajectory, self.cell, self.shape, self.settings,
+                                give_up_above, until)
+        if shaped is None:
+            return None
+        warnings = () if shaped.improved else (
+            f'whole-curve optimisation found no faster proven curve ({shaped.message}); '
+            'returning the corridor curve',)
+        metrics = dict(timed.metrics, optimised=shaped.improved,
+                       shape_iterations=shaped.iterations, shape_rounds=shaped.rounds,
+                       spans=shaped.spans, corridor_cycle_time=timed.trajectory.duration)
+        return Shaped(shaped.trajectory, initial, metrics, timed.warnings + warnings)
+
+
+METHODS = {method.name: method for method in (KnotTiming, WholeCurve)}
 """The methods by name."""

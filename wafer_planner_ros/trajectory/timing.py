@@ -13,7 +13,9 @@ Variables: the durations h of the spline's spans. Objective: the total time sum(
 - the wafer-centre acceleration on x and y (Eq. 9), and on |a| when the cell sets
   ``wafer_acceleration_norm_limit``, at constraint samples: the paper's, at every knot;
 - ``h >= min_interval``: Eq. 10 as printed would force every span to last the whole
-  straight-line time, so it is read as a small positive lower bound.
+  straight-line time, so it is read as a positive lower bound: 1 ms when the cell limits
+  jerk (the jerk control points then keep spans apart), 20 ms when it does not
+  (``TimingSettings.shortest``).
 
 The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ computed from a
 dense sample of the wafer acceleration so that it is feasible everywhere; SLSQP then solves
@@ -74,7 +76,7 @@ def optimise(problem: TimingProblem, start=None, give_up_above=None) -> Optional
         iterations += result.nit
         if not np.all(np.isfinite(result.x)):
             break
-        intervals = np.maximum(result.x, tuning.min_interval)
+        intervals = np.maximum(result.x, problem.min_interval)
         if give_up_above is not None and \
                 intervals.sum() > (1.0 + tuning.give_up_margin) * give_up_above:
             logger.debug('round %d: T = %.4f s cannot beat %.4f s', rounds, intervals.sum(),
@@ -117,7 +119,7 @@ def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
     the durations themselves.
     """
     scale = start.copy()
-    shortest = problem.settings.min_interval
+    shortest = problem.min_interval
     last = {}
 
     def linearised(x):  # SLSQP asks for values, then gradients, at each new point

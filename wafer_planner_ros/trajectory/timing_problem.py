@@ -56,6 +56,8 @@ class TimingProblem:
                  settings: TimingSettings = TimingSettings()):
         """Set up the problem for control points (n + 1, 3) of a cell's robot."""
         self.settings = settings
+        self.min_interval = settings.shortest(robot)
+        """s: the shortest span."""
         self.points = np.asarray(control_points, float)
         self.spans = len(self.points) - DEGREE
         self.arm = robot.arm
@@ -176,11 +178,12 @@ def initial_intervals(problem: TimingProblem) -> np.ndarray:
     Return the uniform timing of the paper's start point, before λ-scaling.
 
     The total is the straight-line time of the slowest joint, max_j |qG - qI|_j / LV_j (the
-    paper prints min_j, which is zero when a joint does not move); at least 0.01 s.
+    paper prints min_j, which is zero when a joint does not move); at least 0.01 s, and no
+    span shorter than the shortest allowed.
     """
     travel = np.abs(problem.points[-1] - problem.points[0]) / problem.limits.velocity
     total = max(float(travel.max()), 0.01)
-    return np.full(problem.spans, total / problem.spans)
+    return np.full(problem.spans, max(total / problem.spans, problem.min_interval))
 
 
 def scaled_start(problem: TimingProblem) -> tuple:

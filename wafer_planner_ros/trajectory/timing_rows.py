@@ -35,8 +35,8 @@ def wafer_rows(padded, windows, points, span, fraction, link_lengths, limits, gr
         p = points[span[k]:span[k] + DEGREE + 1]
         if not gradients:
             state = window_states(h, p, fraction[k])
-            g = _wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1],
-                                                   state[2]), limits)
+            g = wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1],
+                                                  state[2]), limits)
             for c in range(parts):
                 values[c, k] = g[c]
             continue
@@ -44,8 +44,8 @@ def wafer_rows(padded, windows, points, span, fraction, link_lengths, limits, gr
             window[:] = h
             window[d + 1] += 1j * COMPLEX_STEP
             state = window_states(window, p, fraction[k])
-            g = _wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1],
-                                                   state[2]), limits)
+            g = wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1],
+                                                  state[2]), limits)
             for c in range(parts):
                 values[c, k] = g[c].real
                 local[c, k, d] = g[c].imag / COMPLEX_STEP
@@ -53,7 +53,7 @@ def wafer_rows(padded, windows, points, span, fraction, link_lengths, limits, gr
 
 
 @njit(cache=True, nogil=True)
-def _wafer_g(ax, ay, limits):
+def wafer_g(ax, ay, limits):
     """Return the x, y and |a| constraint values g = 1 - (a / limit)^2 (float or complex)."""
     norm = 1.0 + 0.0 * ax
     if limits[2] > 0.0:

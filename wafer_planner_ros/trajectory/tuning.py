@@ -11,7 +11,17 @@ class TimingSettings:
     """Limits are tightened by this factor inside the optimiser, so that what lies between
     dense samples stays below the true limits that verification applies."""
     min_interval: float = 1e-3
-    """s: the shortest span (Eq. 10 read as a small positive lower bound)."""
+    """s: the shortest span when the cell limits jerk (Eq. 10 read as a small positive lower
+    bound; the jerk control points keep spans from collapsing)."""
+    min_interval_without_jerk: float = 0.02
+    """s: the shortest span when the cell does not limit jerk. Spans of 1 ms let the
+    acceleration step within 1 ms (11,800 rad/s^3 measured); at 20 ms a step of the whole
+    acceleration range takes 20 ms or more."""
+
+    def shortest(self, robot) -> float:
+        """Return the shortest span (s) for ``robot``: with or without a jerk limit."""
+        return self.min_interval if robot.limits.jerk is not None \
+            else self.min_interval_without_jerk
     dense_step: float = 1e-3
     """s: the step of the dense check of every answer."""
     max_rounds: int = 4
@@ -31,3 +41,30 @@ class TimingSettings:
     """Control-point constraints at 70 % of their limit or more are kept in the solver."""
     max_iterations: int = 200
     """SLSQP iterations per round at most."""
+
+
+@dataclass(frozen=True)
+class ShapeSettings:
+    """How the whole curve is optimised (``trajectory.shape``)."""
+
+    min_spans: int = 16
+    """Knots are inserted (halving the longest spans) until the start curve has this many
+    spans: a straight two-vertex path has only four, too few to shape."""
+    wafer_samples: int = 3
+    """Wafer-acceleration samples per span in the first round."""
+    clearance_samples: int = 4
+    """Clearance samples per span in the first round."""
+    clearance: float = 0.002
+    """m: what every body keeps from the walls at the samples (the proof then covers the
+    curve between them)."""
+    watch: float = 0.05
+    """m: bodies this near a wall at a sample have their clearance constrained there."""
+    near_limit: float = 0.3
+    """rad: control points this near a position limit at the start of a solve are bounded
+    by it in the solver; the others are checked afterwards."""
+    max_rounds: int = 6
+    """Solves at most, each after adding samples where the last answer fell short."""
+    max_iterations: int = 100
+    """SLSQP iterations per solve at most."""
+    ftol: float = 1e-4
+    """s: SLSQP's stopping precision on the total time."""

@@ -1,18 +1,21 @@
 """
 Verification of a trajectory before it leaves the planner (SPEC section 3.9).
 
-Limits are checked every ``LIMIT_STEP`` seconds, collisions at configurations no more than
-``COLLISION_STEP`` rad apart in any joint: on each eighth of a span the time step between
-collision checks is ``COLLISION_STEP`` over the exact peak joint speed there. Also checked:
-the start and goal are hit exactly, and velocity and acceleration are zero at both ends.
+The curve must be proven collision-free (``proof.prove``: no sampling step). As a second,
+independent line, limits are checked every ``LIMIT_STEP`` seconds and collisions at
+configurations no more than ``COLLISION_STEP`` rad apart in any joint: on each eighth of a
+span the time step between collision checks is ``COLLISION_STEP`` over the exact peak
+joint speed there. Also checked: the start and goal are hit exactly, and velocity and
+acceleration are zero at both ends.
 """
 
 from dataclasses import dataclass, field
-from typing import Mapping, Tuple
+from typing import Mapping, Optional, Tuple
 
 import numpy as np
 
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.proof import CurveProof, DEFAULT_MAX_DEPTH, prove
 
 LIMIT_STEP = 1e-3      # s
 COLLISION_STEP = 1e-3  # rad
@@ -31,8 +34,12 @@ class Verification:
     """Smallest distance from the robot to a wall or obstacle along the motion (m)."""
     peak_jerk: Tuple[float, ...] = ()
     """Largest |jerk| of each joint (rad/s^3)."""
+    peak_wafer_jerk: float = 0.0
+    """Largest |jerk| of the wafer centre (m/s^3), what makes a wafer slide."""
     limit_samples: int = 0
     collision_samples: int = 0
+    proof: Optional[CurveProof] = None
+    """The proof that the curve is collision-free (None only if it was not attempted)."""
 
     @property
     def ok(self) -> bool:
@@ -74,6 +81,11 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
     ends = np.abs(np.concatenate([qd[[0, -1]], qdd[[0, -1]]])).max()
     if ends > END_TOLERANCE:
         problems.append(f'velocity or acceleration at an end is {ends:.3g}, not zero')
+    proof = prove(trajectory, cell.clearance_model, robot.lipschitz)
+    if not proof.certified:
+        problems.append('the curve is not proven collision-free: ' + (
+            f'in collision at t = {proof.collision:.4f} s' if proof.collision is not None
+            else f'{len(proof.unproven)} pieces still open after {DEFAULT_MAX_DEPTH} splits'))
     # The model's bodies are grown by the clearance margin: <= 0 is closer than the margin.
     clearance, checks = dense_clearance(trajectory, cell.clearance_model)
     distance = clearance + robot.clearance_margin
@@ -83,7 +95,9 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
             if robot.clearance_margin else ')'))
     return Verification(problems=tuple(problems), ratios=ratios, min_clearance=distance,
                         peak_jerk=tuple(np.abs(qddd).max(axis=0).tolist()),
-                        limit_samples=len(t), collision_samples=checks)
+                        peak_wafer_jerk=float(np.hypot(*robot.arm.wafer_jerk(
+                            q, qd, qdd, qddd).T).max()),
+                        limit_samples=len(t), collision_samples=checks, proof=proof)
 
 
 def _ratio(values: np.ndarray, limit) -> float:
@@ -101,10 +115,10 @@ def collision_times(trajectory: Trajectory) -> np.ndarray:
     Return check times such that no joint moves more than COLLISION_STEP between two.
 
     The curve is cut into pieces on which the exact peak joint speed is known
-    (``Trajectory.peak_speed``); checks on a piece are ``COLLISION_STEP / that peak``
+    (``Trajectory.pieces``); checks on a piece are ``COLLISION_STEP / that peak``
     seconds apart. The first and last times are 0 and the duration.
     """
-    boundaries, peaks = trajectory.peak_speed()
+    boundaries, peaks = trajectory.pieces()
     # A piece whose speed is not finite fails verification anyway (and its configurations
     # count as colliding): one check is enough there, not a count cast from NaN.
     peaks = np.where(np.isfinite(peaks), peaks, 0.0)

@@ -1,0 +1,161 @@
+"""
+Cycle times against the MoveIt-style peer and the physical yardstick, per station pair.
+
+For every station pair of the default cell and both test cells, and every roadmap seed:
+the paper's pipeline (``PlannerSettings.paper()``), the corridor pipeline with optimised
+knot times (method ``knot-timing``), the whole-curve optimisation (method
+``whole-curve``), the peer (``peer.Peer``: OMPL PRM with 1500 milestones, simplification,
+an interpolating cubic, TOPP-RA) and the per-axis wafer bound
+2 max(sqrt(|dx| / a_x), sqrt(|dy| / a_y)) of the wafer centre's displacement (bang-bang on
+each axis, everything else ignored: no motion is faster). Cycle time, planning ms and
+peak joint jerk for each; ratios to the peer. Writes ``results/cycle.json``.
+
+Run: ``python bench/bench_cycle.py [--seeds 1 2 3] [--cells default pillar notched]``.
+"""
+
+import argparse
+from dataclasses import replace
+import json
+from pathlib import Path
+import platform
+import sys
+import time
+
+from bench_plan import toppra_time  # bench/: this script's folder is on the path
+import numpy as np
+from peer import Peer
+
+from wafer_planner_ros.cell.model import Cell, default_cell_path
+from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.errors import PlanningError
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.roadmap.cache import load_or_build
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / 'results' / 'cycle.json'
+CELLS = {'default': default_cell_path(), 'pillar': HERE.parent / 'test' / 'cells' / 'pillar.yaml',
+         'notched': HERE.parent / 'test' / 'cells' / 'notched.yaml'}
+OURS = {'paper': PlannerSettings.paper(), 'corridor': PlannerSettings(method='knot-timing'),
+        'ours': PlannerSettings(method='whole-curve')}
+
+
+def wafer_bound(cell, start: str, goal: str) -> float:
+    """Return the per-axis bang-bang time of the wafer centre between two stations (s)."""
+    a = np.asarray(cell.stations[start].spec.get('wafer_center') or cell.robot.arm.wafer_center(
+        cell.stations[start].configs[0].q))
+    b = np.asarray(cell.stations[goal].spec.get('wafer_center') or cell.robot.arm.wafer_center(
+        cell.stations[goal].configs[0].q))
+    limit = cell.robot.wafer_acceleration_limit
+    return float(2.0 * np.max(np.sqrt(np.abs(b - a) / limit)))
+
+
+def ours(planner: Planner, start: str, goal: str, reference: bool = False) -> dict:
+    """
+    Return our plan's cycle time, planning ms and peak jerk (or its error).
+
+    ``reference``: also TOPP-RA's time-optimal timing of the very same curve.
+    """
+    started = time.perf_counter()
+    try:
+        result = planner.plan(start, goal)
+    except PlanningError as exc:
+        return {'duration': None, 'planning_ms': (time.perf_counter() - started) * 1000.0,
+                'code': exc.code.value, 'reason': exc.message}
+    toppra = toppra_time(planner.cell, result.trajectory) if reference else None
+    return {'duration': result.cycle_time, 'planning_ms': result.timings_ms['total'],
+            'toppra': toppra, 'toppra_ratio': None if not toppra or not toppra['duration']
+            else result.cycle_time / toppra['duration'],
+            'peak_jerk': list(result.verification.peak_jerk),
+            'jerk_ratio': result.verification.ratios.get('jerk'),
+            'certified': result.verification.proof.certified,
+            'min_clearance': result.min_clearance, 'warnings': list(result.warnings)}
+
+
+def run(name: str, seed: int) -> dict:
+    """Return every pair of one cell and seed."""
+    cell = Cell.from_yaml(CELLS[name])
+    roadmap = load_or_build(cell, seed=seed).roadmap
+    planners = {key: Planner(cell, roadmap, replace(settings))
+                for key, settings in OURS.items()}
+    peer = Peer(cell, seed=seed)
+    rows = []
+    for start, goal in station_pairs(cell):
+        row = {'from': start, 'to': goal, 'bound': wafer_bound(cell, start, goal)}
+        for key, planner in planners.items():
+            row[key] = ours(planner, start, goal, reference=key == 'ours')
+        row['peer'] = peer.plan_stations(start, goal)
+        rows.append(row)
+        _print_row(row)
+    return {'cell': cell.name, 'seed': seed, 'peer_build_seconds': peer.build_seconds,
+            'rows': rows, 'summary': _summary(rows)}
+
+
+def _ratio(row: dict, key: str):
+    mine, peer = row[key]['duration'], row['peer']['duration']
+    return None if mine is None or peer is None else mine / peer
+
+
+def _summary(rows: list) -> dict:
+    out = {}
+    for key in (*OURS, 'peer'):
+        times = [r[key]['duration'] for r in rows if r[key]['duration'] is not None]
+        planning = [r[key]['planning_ms'] for r in rows]
+        out[key] = {'median_s': float(np.median(times)) if times else None,
+                    'median_planning_ms': float(np.median(planning))}
+        if key == 'ours':
+            toppra = [r[key]['toppra_ratio'] for r in rows if r[key].get('toppra_ratio')]
+            out[key]['median_vs_toppra'] = float(np.median(toppra)) if toppra else None
+        if key != 'peer':
+            ratios = [x for x in (_ratio(r, key) for r in rows) if x is not None]
+            out[key].update(median_vs_peer=float(np.median(ratios)) if ratios else None,
+                            worst_vs_peer=float(max(ratios)) if ratios else None,
+                            at_most_peer=sum(x <= 1.0 for x in ratios), pairs=len(rows))
+    out['bound'] = {'median_s': float(np.median([r['bound'] for r in rows]))}
+    return out
+
+
+def _print_row(row: dict) -> None:
+    cells = [f"{row['from'] + '->' + row['to']:<24}{row['bound']:>7.3f}"]
+    for key in (*OURS, 'peer'):
+        entry = row[key]
+        duration = entry['duration']
+        jerk = max(entry.get('peak_jerk') or [float('nan')])
+        cells.append(f"{duration if duration is not None else float('nan'):>8.3f}"
+                     f"{entry['planning_ms']:>9.0f}{jerk:>8.0f}")
+    ratio = _ratio(row, 'ours')
+    cells.append(f"{ratio if ratio is not None else float('nan'):>7.3f}")
+    print(''.join(cells), flush=True)
+
+
+def main() -> int:
+    """Run the benchmark and write the JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--seeds', type=int, nargs='+', default=[1])
+    parser.add_argument('--cells', nargs='+', choices=sorted(CELLS), default=list(CELLS))
+    args = parser.parse_args()
+    header = f"{'pair':<24}{'bound':>7}" + ''.join(
+        f'{key + " s":>8}{"ms":>9}{"jerk":>8}' for key in (*OURS, 'peer')) + f"{'/peer':>7}"
+    runs = []
+    for name in args.cells:
+        for seed in args.seeds:
+            print(f'\n{name}, seed {seed}\n{header}', flush=True)
+            result = run(name, seed)
+            runs.append(result)
+            s = result['summary']
+            print(f"median: bound {s['bound']['median_s']:.3f} s, " + ', '.join(
+                f"{key} {s[key]['median_s']:.3f} s" for key in (*OURS, 'peer'))
+                + f"; ours/TOPP-RA on our curve {s['ours']['median_vs_toppra']:.3f}"
+                + f"; ours/peer median {s['ours']['median_vs_peer']:.3f}, worst "
+                f"{s['ours']['worst_vs_peer']:.3f}, at most the peer on "
+                f"{s['ours']['at_most_peer']}/{s['ours']['pairs']} pairs")
+    RESULTS.parent.mkdir(exist_ok=True)
+    RESULTS.write_text(json.dumps({
+        'benchmark': 'cycle times per station pair: ours, the paper, the peer, the bound',
+        'machine': {'python': platform.python_version(), 'cpus': __import__('os').cpu_count()},
+        'runs': runs}, indent=1))
+    print(f'\nwrote {RESULTS}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,90 @@
+"""
+The whole-curve optimisation.
+
+Exact rows, an unchanged curve after refinement, and plans that pass the independent check
+faster than the corridor curve.
+"""
+
+from independent import check
+import numpy as np
+import pytest
+
+from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.report import plan_json, roadmap_json
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.trajectory.shape import _clearance_samples, refine, ShapeProblem
+from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
+
+
+@pytest.fixture(scope='module')
+def corridor(default_cell, default_roadmap):
+    """Return the corridor curve (knot timing) of a pair with corners."""
+    return Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2')
+
+
+def test_refinement_keeps_the_curve_exactly(corridor):
+    curve = corridor.trajectory
+    refined = refine(curve, 2 * len(curve.intervals) + 3)
+    assert len(refined.intervals) == 2 * len(curve.intervals) + 3
+    assert refined.duration == curve.duration
+    t = np.linspace(0.0, curve.duration, 5001)
+    for order in range(3):
+        assert np.allclose(refined.evaluate(t, order), curve.evaluate(t, order), rtol=0,
+                           atol=1e-9 * 10 ** order)
+
+
+def test_every_row_and_its_jacobian_agree_with_finite_differences(default_cell, corridor):
+    """A wrong clearance, wafer or control-point derivative (by P or by h) fails here."""
+    problem = ShapeProblem(corridor.trajectory, default_cell, ShapeSettings(),
+                           TimingSettings())
+    spans = problem.spans
+    wafer = (np.repeat(np.arange(spans), 3), np.tile(np.arange(3) / 3, spans))
+    clearance = _clearance_samples(problem, np.repeat(np.arange(spans), 4),
+                                   np.tile((np.arange(4) + 0.5) / 4, spans), every_body=True)
+    rng = np.random.default_rng(0)
+    points = problem.start.control_points.copy()
+    points[3:-3] += rng.normal(0.0, 0.01, points[3:-3].shape)
+    intervals = problem.start.intervals * rng.uniform(0.9, 1.1, spans) + 0.01
+    values, jacobian = problem.rows(points, intervals, wafer, clearance)
+    kinds = {'clearance': slice(len(values) - len(clearance[0]), None)}
+    columns = np.concatenate([np.arange(3 * 3, 3 * (problem.count - 3)),  # free points
+                              3 * problem.count + np.arange(spans)])       # durations
+    step = 1e-6
+    worst = 0.0
+    for column in columns:
+        up, down = [points.copy(), intervals.copy()], [points.copy(), intervals.copy()]
+        if column < 3 * problem.count:
+            up[0].flat[column] += step
+            down[0].flat[column] -= step
+        else:
+            up[1][column - 3 * problem.count] += step
+            down[1][column - 3 * problem.count] -= step
+        difference = (problem.rows(*up, wafer, clearance)[0]
+                      - problem.rows(*down, wafer, clearance)[0]) / (2.0 * step)
+        error = np.abs(difference - jacobian[:, column]) / (1.0 + np.abs(jacobian[:, column]))
+        worst = max(worst, float(error.max()))
+        # The clearance rows move with the control points near them: not all zero.
+    assert worst < 1e-6
+    assert np.abs(jacobian[kinds['clearance']][:, columns]).max() > 0.1
+
+
+def test_whole_curve_plans_pass_the_independent_check_and_beat_the_corridor(
+        cell, roadmap, roadmap_cache):
+    """
+    Check one station pair of each test cell, on the corridor curve's elbow branches.
+
+    Every pair of every cell would take minutes; the benchmark plans them all.
+    """
+    info = roadmap_json(load_or_build(cell, cache_dir=roadmap_cache))
+    start, goal = station_pairs(cell)[0]
+    corridor = Planner(cell, roadmap).plan(start, goal)
+    result = Planner(cell, roadmap, PlannerSettings(method='whole-curve')).plan(
+        start, goal, branches=corridor.branches)
+    ratios = check(cell, plan_json(result, info, cell.robot.joint_names), result.start_q,
+                   result.goal_q)
+    assert ratios['jerk'] <= 1.0 + 1e-6  # every test cell limits jerk
+    proof = result.verification.proof
+    assert proof.certified and result.metrics['method'] == 'whole-curve'
+    assert result.cycle_time < 0.8 * corridor.cycle_time
+    assert not result.warnings

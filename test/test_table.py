@@ -1,0 +1,112 @@
+"""The station table: built, stored, loaded and checked; a bad file is never trusted."""
+
+from collections import namedtuple
+from dataclasses import replace
+import json
+import time
+
+from independent import check
+import numpy as np
+import pytest
+
+from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.report import plan_json, roadmap_json
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.settings import settings_from
+from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
+from wafer_planner_ros.service.table import save_table, table_key, table_path, TableError
+
+_Request = namedtuple('_Request', 'start goal')
+
+
+@pytest.fixture(scope='module')
+def planner(default_cell, default_roadmap):
+    """Return a corridor-curve planner: the table works with any method, and this is fast."""
+    return Planner(default_cell, default_roadmap)
+
+
+@pytest.fixture(scope='module')
+def built(planner):
+    """Return the default cell's table, built once."""
+    return build_table(planner)
+
+
+def test_the_table_holds_every_station_pair_as_planned(planner, built, default_cell,
+                                                       roadmap_cache):
+    assert set(built.entries) == set(station_pairs(default_cell)) and not built.failures
+    info = roadmap_json(load_or_build(default_cell, cache_dir=roadmap_cache))
+    for start, goal in station_pairs(default_cell)[:3]:
+        answer = built.answer(planner, start, goal)
+        fresh = planner.plan(start, goal)
+        assert answer.cycle_time == fresh.cycle_time
+        assert np.array_equal(answer.positions, fresh.positions)
+        assert answer.verification.proof.certified and answer.metrics['source'] == 'table'
+        check(default_cell, plan_json(answer, info, default_cell.robot.joint_names),
+              answer.start_q, answer.goal_q)
+    assert built.answer(planner, 'loadport1', 'loadport2') is None  # not a table pair
+
+
+def test_a_stored_table_loads_to_the_same_answers(planner, built, tmp_path):
+    path = save_table(built, tmp_path)
+    assert path == table_path(tmp_path, table_key(planner))
+    loaded = load_table(planner, tmp_path)
+    assert loaded.loaded and set(loaded.entries) == set(built.entries)
+    for pair in built.entries:
+        assert loaded.answer(planner, *pair).cycle_time == built.answer(planner, *pair).cycle_time
+    # Another sample period shares the table; other planner settings do not.
+    other = Planner(planner.cell, planner.roadmap, PlannerSettings(sample_period=0.02))
+    assert table_key(other) == table_key(planner)
+    assert np.allclose(np.diff(load_table(other, tmp_path).answer(
+        other, 'loadport1', 'loadlock1').times[:-1]), 0.02)
+    paper = Planner(planner.cell, planner.roadmap, PlannerSettings.paper())
+    with pytest.raises(TableError, match='no table file'):
+        load_table(paper, tmp_path)
+
+
+@pytest.mark.parametrize('damage, words', [
+    (lambda doc: doc['entries'][0]['trajectory']['knots'].__setitem__(5, 0.5), 'digest'),
+    (lambda doc: doc.__setitem__('key', '0' * 64), 'another cell'),
+    (lambda doc: doc.pop('entries'), 'unreadable'),
+])
+def test_a_damaged_or_foreign_file_is_refused(planner, built, tmp_path, damage, words):
+    path = save_table(built, tmp_path)
+    document = json.loads(path.read_text())
+    damage(document)
+    path.write_text(json.dumps(document))
+    with pytest.raises(TableError, match=words):
+        load_table(planner, tmp_path)
+
+
+def test_an_entry_that_does_not_join_its_stations_is_refused(planner, built, tmp_path):
+    swapped = replace(built, entries=dict(built.entries))
+    pairs = sorted(built.entries)
+    swapped.entries[pairs[0]] = built.entries[pairs[1]]  # digest consistent, curve wrong
+    save_table(swapped, tmp_path)
+    with pytest.raises(TableError, match='does not join the two stations'):
+        load_table(planner, tmp_path)
+    # load_or_build_table then rebuilds and stores a good one.
+    rebuilt = load_or_build_table(planner, tmp_path)
+    assert not rebuilt.loaded and load_table(planner, tmp_path).loaded
+
+
+def test_a_request_is_answered_from_the_table_the_corridor_or_the_budget(planner, built):
+    from wafer_planner_ros.node.serving import plan_request
+    settings = replace(settings_from({}), optimise_budget=0.3)
+    deadline = time.monotonic() + 60.0
+    held = plan_request(planner, built, _Request('loadport1', 'loadlock1'), settings, deadline)
+    assert held.metrics['source'] == 'table' and set(held.timings_ms) == {'table', 'total'}
+    # A station pair the table does not hold, or no table yet: the corridor curve.
+    for table, request in ((built, _Request('loadport1', 'loadport2')),
+                           (None, _Request('loadport1', 'loadlock1'))):
+        answer = plan_request(planner, table, request, settings, deadline)
+        assert answer.metrics['method'] == 'knot-timing' and 'source' not in answer.metrics
+    # Joint angles: the whole-curve optimisation within the budget, verified and proven.
+    angles = _Request(list(planner.cell.stations['loadport1'].configs[0].q), 'loadlock2')
+    budgeted = plan_request(planner, built, angles, settings, deadline)
+    assert budgeted.metrics['method'] == 'whole-curve'
+    assert budgeted.verification.ok and budgeted.verification.proof.certified
+    corridor = plan_request(planner, built, angles, replace(settings, optimise_budget=0.0),
+                            deadline)
+    assert corridor.metrics['method'] == 'knot-timing'
+    assert budgeted.cycle_time <= corridor.cycle_time

@@ -1,0 +1,385 @@
+"""
+Whole-curve optimisation: the control points move together with the span durations.
+
+**Beyond the paper.** The corridor keeps the curve inside tiny boxes at the path's corners,
+so the wafer nearly stops there. Here the curve may leave them: its freedom from collision
+is proven afterwards on the curve itself (``proof.prove``). Variables: every control point
+but the three at each end (the complete stops) and every span duration. Objective: the
+total time. Constraints:
+
+- joint velocity, acceleration (and jerk) by their control points: by the convex hull,
+  exact everywhere; joint positions by bounds on the control points (the same argument);
+- the wafer-centre acceleration on x, y (and |a|) at samples, with the dense check and
+  resampling loop of ``timing.optimise``;
+- clearance at samples: every body nearer than ``ShapeSettings.watch`` keeps at least
+  ``ShapeSettings.clearance`` (less where the start curve itself is closer, so that the
+  start stays feasible).
+
+The start is a verified curve (the corridor curve, always feasible), with its knot vector
+refined first where it has few spans. SLSQP solves with exact gradients (``shape_rows``;
+clearance from the closest points and the body Jacobian). Each answer is scaled by its own
+λ (Eq. 12) to meet every limit everywhere, then proven collision-free; where a piece cannot
+be proven, clearance samples are added there and the problem is solved again. Only proven
+curves are kept: the fastest is returned, or the start when none beats it.
+"""
+
+from dataclasses import dataclass
+import logging
+import time
+from typing import Optional
+
+import numpy as np
+from scipy.optimize import minimize
+
+from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, knots_from_intervals
+from wafer_planner_ros.trajectory.bspline import padded_windows
+from wafer_planner_ros.trajectory.proof import prove
+from wafer_planner_ros.trajectory.shape_rows import derivative_matrices, LOCAL
+from wafer_planner_ros.trajectory.shape_rows import position_rows, wafer_rows_full
+from wafer_planner_ros.trajectory.timing_problem import TimingProblem
+from wafer_planner_ros.trajectory.timing_rows import control_rows
+from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
+
+logger = logging.getLogger(__name__)
+
+CLEARANCE_SCALE = 0.01
+"""m: clearance rows are (d - kept) / this, of the order of the other rows."""
+
+
+@dataclass(frozen=True, eq=False)
+class Shaping:
+    """The outcome of the whole-curve optimisation."""
+
+    trajectory: CubicBSpline
+    """The fastest proven curve (the start when nothing beat it)."""
+    improved: bool
+    iterations: int
+    rounds: int
+    spans: int
+    """Spans after knot refinement."""
+    message: str = ''
+
+
+def refine(curve: CubicBSpline, spans: int) -> CubicBSpline:
+    """Return the same curve with its longest spans halved until it has ``spans`` (Boehm)."""
+    points, knots = curve.control_points, curve.knots
+    while len(knots) - 2 * DEGREE - 1 < spans:
+        widths = np.diff(knots[DEGREE:-DEGREE])
+        s = int(np.argmax(widths))
+        at, k = knots[DEGREE + s] + 0.5 * widths[s], DEGREE + s
+        new = np.empty((len(points) + 1, points.shape[1]))
+        new[:k - DEGREE + 1] = points[:k - DEGREE + 1]
+        new[k + 1:] = points[k:]
+        for i in range(k - DEGREE + 1, k + 1):
+            alpha = (at - knots[i]) / (knots[i + DEGREE] - knots[i])
+            new[i] = alpha * points[i] + (1.0 - alpha) * points[i - 1]
+        points, knots = new, np.insert(knots, k + 1, at)
+    return CubicBSpline(knots, points)
+
+
+class ShapeProblem:
+    """The whole-curve optimisation of one verified start curve (see the module)."""
+
+    def __init__(self, start: CubicBSpline, cell, shape: ShapeSettings,
+                 timing: TimingSettings):
+        """Refine the start curve's knots and set up the problem for ``cell``'s robot."""
+        self.cell, self.settings, self.timing = cell, shape, timing
+        self.robot, self.model = cell.robot, cell.clearance_model
+        self.start = refine(start, shape.min_spans)
+        self.count = len(self.start.control_points)
+        self.spans = self.count - DEGREE
+        limits = self.robot.limits
+        orders = [limits.velocity, limits.acceleration] + (
+            [limits.jerk] if limits.jerk is not None else [])
+        self._control_limits = timing.margin * np.array(orders, float)
+        wafer = self.robot.wafer_acceleration_limit
+        self._wafer_limits = timing.margin * np.array(
+            [wafer[0], wafer[1], self.robot.wafer_acceleration_norm_limit or 0.0])
+        self.min_interval = timing.shortest(self.robot)
+        self.fixed = np.zeros(self.count, dtype=bool)
+        self.fixed[:DEGREE] = self.fixed[-DEGREE:] = True
+
+    # ------------------------------------------------------------ variables
+
+    def pack(self, points: np.ndarray, intervals: np.ndarray, scale: np.ndarray):
+        """Return x: the free control points, then the durations relative to ``scale``."""
+        return np.concatenate([points[~self.fixed].ravel(), intervals / scale])
+
+    def unpack(self, x: np.ndarray, scale: np.ndarray) -> tuple:
+        """Return (control points, durations) of x."""
+        points = self.start.control_points.copy()
+        free = int((~self.fixed).sum())
+        points[~self.fixed] = x[:3 * free].reshape(free, 3)
+        return points, x[3 * free:] * scale
+
+    # ------------------------------------------------------------ rows
+
+    def rows(self, points, intervals, wafer, clearance) -> tuple:
+        """
+        Return the constraint values g >= 0 and their Jacobian by (points, durations).
+
+        ``wafer``: (span, fraction) samples; ``clearance``: (span, fraction, body, kept)
+        samples. The Jacobian's columns
+        are every control point's coordinates (count * 3), then every duration.
+        """
+        intervals = np.ascontiguousarray(intervals, float)
+        points = np.ascontiguousarray(points, float)
+        columns = 3 * self.count + self.spans
+        values, blocks = [], []
+        # Control points: linear in P for given durations.
+        control, by_h = control_rows(intervals, points, self._control_limits, True)
+        knots = knots_from_intervals(intervals)
+        by_p = []
+        for order, matrix in enumerate(derivative_matrices(knots, self.count,
+                                                           len(self._control_limits))):
+            limit = self._control_limits[order]
+            ratio = (matrix @ points) / limit                        # (n_o, 3)
+            coef = -2.0 * ratio / limit                              # dg/dD
+            block = np.zeros((len(matrix), 3, self.count, 3))
+            for j in range(3):
+                block[:, j, :, j] = coef[:, j, None] * matrix
+            by_p.append(block.reshape(3 * len(matrix), 3 * self.count))
+        jac = np.hstack([np.vstack(by_p), by_h])
+        values.append(control)
+        blocks.append(jac)
+        # Wafer acceleration at samples.
+        span, fraction = wafer
+        if len(span):
+            padded, windows = padded_windows(intervals, span)
+            g, g_h, g_p = wafer_rows_full(padded, windows, points, span, fraction,
+                                          self.robot.arm.link_lengths, self._wafer_limits)
+            parts = len(g)
+            block = np.zeros((parts, len(span), columns))
+            rows_index = np.arange(len(span))
+            for j in range(DEGREE + 1):
+                for i in range(3):
+                    block[:, rows_index, 3 * (span + j) + i] = g_p[:, :, j, i]
+            for d in range(LOCAL):
+                column = span + d - 2  # h_{s-2+d}; beyond the ends it does not exist
+                inside = (column >= 0) & (column < self.spans)
+                block[:, rows_index[inside], 3 * self.count + column[inside]] = \
+                    g_h[:, inside, d]
+            values.append(g.ravel())
+            blocks.append(block.reshape(parts * len(span), columns))
+        # Clearance at samples: the body Jacobian through the basis.
+        span, fraction, body, kept = clearance
+        if len(span):
+            d, d_h, basis = self._clearance(points, intervals, span, fraction, body)
+            value, grad = d
+            block = np.zeros((len(span), columns))
+            rows_index = np.arange(len(span))
+            for j in range(DEGREE + 1):
+                for i in range(3):
+                    block[rows_index, 3 * (span + j) + i] = basis[:, j] * grad[:, i]
+            for k in range(LOCAL):
+                column = span + k - 2
+                inside = (column >= 0) & (column < self.spans)
+                block[rows_index[inside], 3 * self.count + column[inside]] = \
+                    d_h[inside, k]
+            values.append((value - kept) / CLEARANCE_SCALE)
+            blocks.append(block / CLEARANCE_SCALE)
+        return np.concatenate(values), np.vstack(blocks)
+
+    def _clearance(self, points, intervals, span, fraction, body) -> tuple:
+        """Return ((clearance, gradient by q), d clearance / dh (K, 5), basis (K, 4))."""
+        padded, windows = padded_windows(intervals, span)
+        q, q_h, basis = position_rows(padded, windows, points, span, fraction)
+        clearance, gradient = self.model.body_clearance_gradient(q)
+        rows = np.arange(len(span))
+        value, grad = clearance[rows, body], gradient[rows, body]      # (K,), (K, 3)
+        return (value, grad), np.einsum('kdi,ki->kd', q_h, grad), basis
+
+    def clearances(self, curve: CubicBSpline, span, fraction) -> np.ndarray:
+        """Return every body's clearance (K, 4) at samples of a curve of this problem."""
+        padded, windows = padded_windows(curve.intervals, span)
+        q = position_rows(padded, windows, curve.control_points, span, fraction)[0]
+        return self.model.body_clearance(q)
+
+
+def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettings(),
+                   timing: TimingSettings = TimingSettings(),
+                   give_up_above: Optional[float] = None,
+                   deadline: Optional[float] = None) -> Optional[Shaping]:
+    """
+    Return the fastest proven curve from a verified start (see the module).
+
+    ``give_up_above``: a cycle time (s) this curve need not beat; None is returned as soon
+    as a solve's optimum, whose samples are a subset of the final ones, exceeds it by more
+    than ``TimingSettings.give_up_margin``. ``deadline``: a ``time.monotonic()`` instant;
+    the solver stops there and the fastest proven curve so far is returned (the start at
+    worst).
+    """
+    problem = ShapeProblem(start, cell, shape, timing)
+    best = current = problem.start
+    spans = problem.spans
+    inside = np.arange(shape.wafer_samples) / shape.wafer_samples
+    wafer = (np.append(np.repeat(np.arange(spans), len(inside)), spans - 1),
+             np.append(np.tile(inside, spans), 1.0))
+    around = (np.arange(shape.clearance_samples) + 0.5) / shape.clearance_samples
+    clearance = _clearance_samples(problem, np.repeat(np.arange(spans), len(around)),
+                                   np.tile(around, spans))
+    lower, upper = cell.robot.limits.position.T
+    bounded = np.zeros((problem.count, 3), dtype=bool)  # position limits in the solver
+    iterations, message = 0, ''
+    for rounds in range(1, shape.max_rounds + 1):
+        if deadline is not None and time.monotonic() >= deadline:
+            message = 'the time budget ran out'
+            break
+        bounded |= (current.control_points - lower < shape.near_limit) | \
+            (upper - current.control_points < shape.near_limit)
+        result = _solve(problem, current, wafer, clearance, bounded, deadline)
+        iterations += result.nit
+        points, intervals = result.points, np.maximum(result.intervals, problem.min_interval)
+        if not (np.all(np.isfinite(points)) and np.all(np.isfinite(intervals))):
+            message = f'solver failed: {result.message}'
+            break
+        if give_up_above is not None and result.converged and \
+                intervals.sum() > (1.0 + timing.give_up_margin) * give_up_above:
+            logger.debug('shape round %d: T = %.4f s cannot beat %.4f s', rounds,
+                         intervals.sum(), give_up_above)
+            return None
+        outside = (points < lower) | (points > upper)
+        if outside.any():  # a limit left out of the solver: in it from now on
+            logger.debug('shape round %d: %d control points outside the position limits',
+                         rounds, outside.sum())
+            bounded |= outside
+            continue
+        timed = TimingProblem(points, cell.robot, timing)
+        ratio, dense_span, dense_fraction = timed.dense_wafer_ratio(intervals)
+        rescale = timed.scale_factor(intervals, ratio.max())
+        curve = CubicBSpline.from_intervals(points, rescale * intervals)
+        proof = prove(curve, problem.model, cell.robot.lipschitz)
+        logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '
+                     'proven %s, min span %.4f s', rounds, result.message, result.nit,
+                     curve.duration, rescale, ratio.max(), proof.certified, intervals.min())
+        if proof.certified:
+            current = curve  # feasible everywhere: the next solve starts there
+            if curve.duration < best.duration:
+                best = curve
+            if rescale <= 1.0 + timing.rescale_tolerance:
+                break
+        else:
+            # Sample the pieces that could not be proven, for every body, and solve again.
+            times = np.concatenate([proof.unproven.mean(axis=1), proof.unproven.ravel()])
+            if proof.collision is not None:
+                times = np.append(times, proof.collision)
+            more = _clearance_samples(problem, *_at_times(curve, times), every_body=True)
+            clearance = tuple(np.concatenate([a, b]) for a, b in zip(clearance, more))
+        if rescale > 1.0 + timing.rescale_tolerance:
+            # Between samples the wafer limit was exceeded: sample the peaks.
+            peaks = _peaks_over(ratio, timing.margin * (1.0 + 2e-4))
+            wafer = (np.append(wafer[0], dense_span[peaks]),
+                     np.append(wafer[1], dense_fraction[peaks]))
+    improved = best is not problem.start
+    if not improved and not message:
+        message = 'no proven curve beat the start'
+    return Shaping(best, improved, iterations, rounds, spans, message)
+
+
+def _clearance_samples(problem: ShapeProblem, span, fraction,
+                       every_body: bool = False) -> tuple:
+    """
+    Return (span, fraction, body, kept) rows for the bodies near the walls at samples.
+
+    ``kept``: the clearance a body keeps there, ``ShapeSettings.clearance`` or, where the
+    start curve is closer, half of the start's.
+    """
+    span, fraction = np.asarray(span, np.int64), np.asarray(fraction, float)
+    start = problem.clearances(problem.start, span, fraction)               # (K, 4)
+    near = start < problem.settings.watch
+    if every_body:
+        near[:] = True
+    k, body = np.nonzero(near)
+    kept = np.minimum(problem.settings.clearance, 0.5 * start[k, body])
+    return span[k], fraction[k], body, kept
+
+
+def _at_times(curve: CubicBSpline, times) -> tuple:
+    """Return (span, fraction) of times on a curve."""
+    breaks = curve.breaks()
+    times = np.clip(np.asarray(times, float), 0.0, curve.duration)
+    span = np.clip(np.searchsorted(breaks, times, side='right') - 1, 0, len(breaks) - 2)
+    fraction = np.clip((times - breaks[span]) / np.diff(breaks)[span], 0.0, 1.0)
+    return span, fraction
+
+
+def _peaks_over(ratio: np.ndarray, threshold: float) -> np.ndarray:
+    """Return the indices of the local maxima of ``ratio`` that exceed ``threshold``."""
+    padded = np.concatenate([[-np.inf], ratio, [-np.inf]])
+    peak = (ratio >= padded[:-2]) & (ratio > padded[2:]) & (ratio > threshold)
+    return np.nonzero(peak)[0]
+
+
+@dataclass(frozen=True, eq=False)
+class _Solved:
+    """What one SLSQP run returned."""
+
+    points: np.ndarray
+    intervals: np.ndarray
+    nit: int
+    message: str
+    converged: bool
+    """SLSQP stopped at an optimum (not at its iteration limit or a failure)."""
+
+
+def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance, bounded,
+           deadline: Optional[float] = None):
+    """
+    Run SLSQP from ``start``: durations relative to the start's, rows of norm about 1.
+
+    ``bounded`` (count, 3): the control-point coordinates held within the position limits
+    by the solver; at ``deadline`` (``time.monotonic()``) it stops where it is. Rows are
+    weighted to norm 1 near the start, rows that do not depend on the variables dropped:
+    with Jacobian entries from 1e-11 to 1e3 SLSQP's subproblem took 4.5 x as long per
+    iteration (29 ms against 6.5 ms, 55 variables, 253 rows).
+    """
+    scale = start.intervals.copy()
+    free = ~problem.fixed
+    columns = np.concatenate([np.repeat(free, 3), np.ones(problem.spans, bool)])
+    x0 = problem.pack(start.control_points, start.intervals, scale)
+    # A row's norm at the start and at a point nearby: zero at both, it does not depend on
+    # the variables at all (a velocity control point between two fixed points); zero at
+    # the start alone, it is a squared limit at zero speed there and stays in.
+    nearby = x0 + np.random.default_rng(0).uniform(-1e-3, 1e-3, len(x0))
+    norms = []
+    for x in (x0, nearby):
+        values, jacobian = problem.rows(*problem.unpack(x, scale), wafer, clearance)
+        jacobian = jacobian[:, columns]
+        jacobian[:, -problem.spans:] *= scale
+        norms.append(np.linalg.norm(jacobian, axis=1))
+        if x is x0:
+            first = (values, jacobian)
+    norms = np.maximum(*norms)
+    keep = norms > 1e-12
+    weights = 1.0 / norms[keep]
+    last = {'x': x0, 'values': first[0][keep] * weights,
+            'gradients': first[1][keep] * weights[:, None]}
+
+    def linearised(x):  # SLSQP asks for values, then gradients, at each new point
+        if not np.array_equal(last['x'], x):
+            points, intervals = problem.unpack(x, scale)
+            values, jacobian = problem.rows(points, intervals, wafer, clearance)
+            jacobian = jacobian[keep][:, columns] * weights[:, None]
+            jacobian[:, -problem.spans:] *= scale
+            last.update(x=x.copy(), values=values[keep] * weights, gradients=jacobian)
+        return last
+
+    lower, upper = problem.robot.limits.position.T
+    bounds = [(lower[i] if bounded[k, i] else None, upper[i] if bounded[k, i] else None)
+              for k in np.nonzero(free)[0] for i in range(3)]
+    bounds += [(problem.min_interval / v, None) for v in scale]
+    objective = np.concatenate([np.zeros(3 * int(free.sum())), scale])
+
+    def stop_at_deadline(intermediate_result):
+        if deadline is not None and time.monotonic() >= deadline:
+            raise StopIteration
+
+    result = minimize(lambda x: float(x @ objective), x0, jac=lambda x: objective,
+                      callback=stop_at_deadline,
+                      method='SLSQP', bounds=bounds,
+                      constraints=[{'type': 'ineq', 'fun': lambda x: linearised(x)['values'],
+                                    'jac': lambda x: linearised(x)['gradients']}],
+                      options={'maxiter': problem.settings.max_iterations,
+                               'ftol': problem.settings.ftol})
+    points, intervals = problem.unpack(result.x, scale)
+    return _Solved(points, intervals, result.nit, result.message, bool(result.success))
