@@ -120,7 +120,7 @@ def _print_row(row: dict) -> None:
         entry = row[key]
         duration = entry['duration']
         jerk = max(entry.get('peak_jerk') or [float('nan')])
-        cells.append(f"{duration if duration is not None else float('nan'):>8.3f}"
+        cells.append(f"{duration if duration is not None else float('nan'):>11.3f}"
                      f"{entry['planning_ms']:>9.0f}{jerk:>8.0f}")
     ratio = _ratio(row, 'ours')
     cells.append(f"{ratio if ratio is not None else float('nan'):>7.3f}")
@@ -134,7 +134,8 @@ def main() -> int:
     parser.add_argument('--cells', nargs='+', choices=sorted(CELLS), default=list(CELLS))
     args = parser.parse_args()
     header = f"{'pair':<24}{'bound':>7}" + ''.join(
-        f'{key + " s":>8}{"ms":>9}{"jerk":>8}' for key in (*OURS, 'peer')) + f"{'/peer':>7}"
+        f'{key + " s":>11}{"ms":>9}{"jerk":>8}' for key in (*OURS, 'peer'))
+    header += f"{'/peer':>7}"
     runs = []
     for name in args.cells:
         for seed in args.seeds:

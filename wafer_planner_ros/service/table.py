@@ -67,8 +67,8 @@ class StationTable:
             return None
         begun = time.perf_counter()
         result = _result(planner, (start, goal), entry)
-        return replace(result, timings_ms={'table': (time.perf_counter() - begun) * 1000.0,
-                                           'total': (time.perf_counter() - begun) * 1000.0})
+        spent = (time.perf_counter() - begun) * 1000.0
+        return replace(result, timings_ms={'table': spent, 'total': spent})
 
 
 def table_key(planner: Planner) -> str:
