@@ -145,7 +145,8 @@ def main() -> int:
             s = result['summary']
             print(f"median: bound {s['bound']['median_s']:.3f} s, " + ', '.join(
                 f"{key} {s[key]['median_s']:.3f} s" for key in (*OURS, 'peer'))
-                + f"; ours/TOPP-RA on our curve {s['ours']['median_vs_toppra']:.3f}"
+                + '; ours/TOPP-RA on our curve '
+                f"{s['ours']['median_vs_toppra'] or float('nan'):.3f}"
                 + f"; ours/peer median {s['ours']['median_vs_peer']:.3f}, worst "
                 f"{s['ours']['worst_vs_peer']:.3f}, at most the peer on "
                 f"{s['ours']['at_most_peer']}/{s['ours']['pairs']} pairs")

@@ -185,7 +185,10 @@ def run(peer: Peer) -> dict:
     pairs = station_pairs(cell)
     # The station table: loaded from the cache, or planned after the roadmap serves.
     ready, deadline = time.monotonic(), time.monotonic() + 3600.0
-    while _status(peer)['station_table'] < len(pairs):
+    while True:
+        status = _status(peer)
+        if status['station_table'] and status['busy_with'] != 'station_table':
+            break
         if time.monotonic() > deadline:
             raise TimeoutError('the station table was not ready within an hour')
         time.sleep(0.2)

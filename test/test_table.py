@@ -68,6 +68,7 @@ def test_a_stored_table_loads_to_the_same_answers(planner, built, tmp_path):
     (lambda doc: doc['entries'][0]['trajectory']['knots'].__setitem__(5, 0.5), 'digest'),
     (lambda doc: doc.__setitem__('key', '0' * 64), 'another cell'),
     (lambda doc: doc.pop('entries'), 'unreadable'),
+    (lambda doc: doc.__setitem__('failures', [['loadport1', 'loadlock1']]), 'unreadable'),
 ])
 def test_a_damaged_or_foreign_file_is_refused(planner, built, tmp_path, damage, words):
     path = save_table(built, tmp_path)
@@ -110,3 +111,18 @@ def test_a_request_is_answered_from_the_table_the_corridor_or_the_budget(planner
                             deadline)
     assert corridor.metrics['method'] == 'knot-timing'
     assert budgeted.cycle_time <= corridor.cycle_time
+
+
+def test_a_table_missing_pairs_or_with_a_colliding_curve_is_refused(planner, built, tmp_path):
+    pairs = sorted(built.entries)
+    short = replace(built, entries={pair: built.entries[pair] for pair in pairs[1:]})
+    save_table(short, tmp_path)
+    with pytest.raises(TableError, match='lacks 1 station pairs'):
+        load_table(planner, tmp_path)
+    # A curve through the back wall, its digest consistent and its stored proof "certified".
+    entry = json.loads(json.dumps(built.entries[pairs[0]]))
+    points = entry['trajectory']['control_points']
+    points[len(points) // 2] = [-np.pi / 2, 0.0, 0.0]
+    save_table(replace(built, entries=dict(built.entries) | {pairs[0]: entry}), tmp_path)
+    with pytest.raises(TableError, match='not proven collision-free'):
+        load_table(planner, tmp_path)

@@ -231,9 +231,16 @@ class Planner:
                 try:
                     checked = self._verified(candidate, stage_ms)
                 except PlanningError as exc:
-                    logger.warning('%s; trying the next branch combination', exc)
+                    candidate = candidate.fallback()
+                    logger.warning('%s; trying %s', exc, 'the curve it started from'
+                                   if candidate else 'the next branch combination')
                     failure = failure or exc
-                    continue
+                    try:
+                        checked = self._verified(candidate, stage_ms) if candidate else None
+                    except PlanningError:
+                        checked = None
+                    if checked is None:
+                        continue
                 counts = {'candidates': len(prepared), 'given_up': len(given_up)}
                 return self._result(candidate, checked, counts, dict(
                     stage_ms, total=(time.perf_counter() - begun) * 1000.0))
@@ -331,6 +338,11 @@ class _Candidate:
 
     pair: _Prepared
     shaped: Shaped
+
+    def fallback(self) -> Optional['_Candidate']:
+        """Return the combination with the curve its method started from, if it has one."""
+        start = self.shaped.fallback
+        return None if start is None else _Candidate(self.pair, start)
 
 
 class _Clock:

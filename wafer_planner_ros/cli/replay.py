@@ -83,8 +83,7 @@ class Replayer:
         """
         if query.code in NODE_ONLY_CODES:
             return '', None
-        values = query.result.values if query.result is not None else {}
-        if float(values.get('budget') or 0.0) > 0.0:
+        if _budgeted(query):
             return '', None  # the optimisation stopped when its time was up
         try:
             if query.load is None:  # only a station request can be read without the cell
@@ -98,6 +97,27 @@ class Replayer:
         except (RequestError, PlanningError) as exc:
             return exc.code.value, None
         return OK, result.cycle_time
+
+
+def _budgeted(query: Query) -> bool:
+    """
+    Return whether the answer came from the time-budgeted optimisation.
+
+    A successful answer says so (``budget``); an error answer does not, so a joint request
+    planned while ``planning.optimise_budget`` was above 0 counts as budgeted.
+    """
+    values = query.result.values if query.result is not None else {}
+    if 'budget' in values:
+        return _positive(values['budget'])
+    return query.kind != 'station' and _positive(
+        query.parameters.get('planning.optimise_budget', 0.0))
+
+
+def _positive(text) -> bool:
+    try:
+        return float(text) > 0.0
+    except (TypeError, ValueError):
+        return False
 
 
 def main(argv=None) -> int:

@@ -19,6 +19,9 @@ from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
 from wafer_planner_ros.service.table import load_or_build_table, StationTable
 
+MIN_BUDGET = 0.05
+"""s: a budget below this (the request's deadline is near) gets the corridor curve."""
+
 
 @dataclass(frozen=True)
 class Serving:
@@ -61,6 +64,13 @@ def station_table(planner: Planner, settings, logger) -> Optional[StationTable]:
     return table
 
 
+def held_pairs(table: tuple, serving: Optional[Serving]) -> int:
+    """Return how many pairs a (loaded_ns, station table) holds for ``serving`` (0: none)."""
+    loaded_ns, stations = table
+    return len(stations) if stations is not None and serving is not None \
+        and loaded_ns == serving.loaded_ns else 0
+
+
 def plan_request(planner: Planner, table: Optional[StationTable], request, settings,
                  deadline: float):
     """Return the answer to a request (see the module); raise PlanningError."""
@@ -69,13 +79,15 @@ def plan_request(planner: Planner, table: Optional[StationTable], request, setti
         result = table.answer(planner, request.start, request.goal)
         if result is not None:
             return result
-    if stations or settings.optimise_budget <= 0.0:
+    # The budget never eats the time the verification and the answer need: at most half of
+    # what is left before the request's deadline.
+    budget = min(settings.optimise_budget, 0.5 * (deadline - time.monotonic()))
+    if stations or budget < MIN_BUDGET:
         return planner.plan(request.start, request.goal, deadline=deadline)
     whole = Planner(planner.cell, planner.roadmap,
                     replace(planner.settings, method='whole-curve'))
-    result = whole.plan(request.start, request.goal, deadline=deadline,
-                        budget=settings.optimise_budget)
-    return replace(result, metrics=dict(result.metrics, budget=settings.optimise_budget))
+    result = whole.plan(request.start, request.goal, deadline=deadline, budget=budget)
+    return replace(result, metrics=dict(result.metrics, budget=budget))
 
 
 def warm_up(planner) -> None:

@@ -6,8 +6,10 @@ The planning thread plans one request at a time. Requests wait in a bounded back
 ``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The loading thread
 loads the roadmap at start-up (requests meanwhile are answered ``ROADMAP_NOT_READY``) and
 rebuilds it on request: the previous roadmap serves until the new one is ready, and keeps
-serving when the rebuild fails (``rebuild_failed`` in the status says why). Each request is
-planned on the roadmap in force when it was received, the one a recording pairs it with.
+serving when the rebuild fails (``rebuild_failed`` in the status says why); then it loads or
+plans the station table (``serving.station_table``; a rebuild is refused meanwhile). Each
+request is planned on the roadmap in force when it was received, the one a recording
+pairs it with, and answered as ``serving.plan_request`` chooses.
 The worker never publishes: it hands every message, already serialised, to ``send``, which
 the node publishes from its executor. Every request gets exactly one answer, whatever
 happens: a failure of the node itself is answered ``INTERNAL`` with the reason.
@@ -28,8 +30,8 @@ from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving
-from wafer_planner_ros.node.serving import station_table, warm_up
+from wafer_planner_ros.node.serving import held_pairs, plan_request, progress_reporter
+from wafer_planner_ros.node.serving import Serving, station_table, warm_up
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
@@ -56,7 +58,8 @@ class PlanningWorker:
         self._logger, self._stamp = SafeLogger(logger), stamp
         self.lock = threading.Condition()
         """
-        Guards the backlog, the roadmaps, the load state and the counts; wakes the threads.
+        Guards the backlog, the roadmaps, the load state, the station table and the counts;
+        wakes the threads.
 
         ``cell`` and ``answer_error`` read ``_serving`` without it: one reference, replaced
         whole under the lock, so a read sees the old roadmap or the new one, never half.
@@ -67,7 +70,7 @@ class PlanningWorker:
         self._previous: Optional[Serving] = None
         """The roadmap before the serving one, for requests received before it took over."""
         self._table, self._tabling = (None, None), False
-        """(loaded_ns of the serving roadmap it belongs to, its station table); building it."""
+        """(loaded_ns of the roadmap it belongs to, the station table); being planned."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
@@ -198,8 +201,7 @@ class PlanningWorker:
                 'last_error': self.last_error,
                 'rebuild_failed': self.load_failed,
                 'last_rebuild_error': self.last_load_error,
-                'station_table': len(self._table[1]) if self._table[1] is not None and
-                serving is not None and self._table[0] == serving.loaded_ns else 0,
+                'station_table': held_pairs(self._table, serving),
             }
 
     def request_stop(self) -> None:
@@ -274,7 +276,9 @@ class PlanningWorker:
                 planner = Planner(planner.cell, planner.roadmap,
                                   PlannerSettings(sample_period=settings.sample_period))
             begun = time.monotonic()
-            table = self._table[1] if self._table[0] == serving.loaded_ns else None
+            with self.lock:
+                loaded_ns, table = self._table
+            table = table if loaded_ns == serving.loaded_ns else None
             try:
                 result = plan_request(planner, table, request, settings,
                                       received + settings.timeout)
@@ -378,13 +382,14 @@ class PlanningWorker:
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
             f'(ready {time.monotonic() - started:.2f} s after loading began)')
-        self._tabling = True
+        with self.lock:
+            self._tabling, table = True, None
         try:
-            self._table = (loaded_ns, station_table(planner, settings, self._logger))
+            table = station_table(planner, settings, self._logger)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
-        finally:
-            self._tabling = False
+        with self.lock:
+            self._table, self._tabling = (loaded_ns, table), False
 
     def _load_failed(self, exc: Exception, cell_file=None) -> None:
         """Say why the load failed; the serving roadmap, if any, serves on."""

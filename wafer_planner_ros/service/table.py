@@ -6,9 +6,12 @@ Station pairs are a fab's hot path, and the best trajectories take seconds to fi
 planner; ``save_table``/``load_table`` keep the table in the cache directory, one JSON file
 per key. The key is the SHA-256 of the cell's digest, the roadmap's hash, the planner's
 settings (all but the sample period, which only changes the returned samples) and the
-package version; the file stores the key and the SHA-256 of its entries. On load both are
-checked, and so is every entry's curve against the cell (it must start and end exactly at
-the two stations' configurations on the branches it names): a stale, foreign or corrupt
+package version; the file stores the key and the SHA-256 of its content. On load both are
+checked, every station pair must be there (or recorded as not plannable), and every curve
+must be a well-formed clamped cubic that starts and ends exactly at its two stations on
+the branches it names and is proven collision-free again (``proof.prove``, about a
+millisecond each); the limit checks of its verification are taken from the file, which the
+digest protects against damage (not against a deliberate edit). A stale, foreign or corrupt
 file is reported and rebuilt, never trusted. Files are written to a temporary name and
 renamed, so a crash never leaves half a file.
 """
@@ -30,7 +33,7 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
-from wafer_planner_ros.trajectory.proof import CurveProof
+from wafer_planner_ros.trajectory.proof import CurveProof, prove
 from wafer_planner_ros.trajectory.verify import Verification
 
 logger = logging.getLogger(__name__)
@@ -105,9 +108,10 @@ def save_table(table: StationTable, cache_dir) -> Path:
     """Write a table atomically; return its path."""
     path = table_path(cache_dir, table.key)
     entries = [dict(entry, pair=list(pair)) for pair, entry in sorted(table.entries.items())]
-    document = {'key': table.key, 'version': __version__, 'digest': _digest(entries),
-                'entries': entries,
-                'failures': [[*pair, reason] for pair, reason in sorted(table.failures.items())]}
+    failures = [[*pair, reason] for pair, reason in sorted(table.failures.items())]
+    document = {'key': table.key, 'version': __version__,
+                'digest': _digest([entries, failures]), 'entries': entries,
+                'failures': failures}
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=TMP_SUFFIX, dir=path.parent)
     try:
@@ -129,24 +133,28 @@ def load_table(planner: Planner, cache_dir) -> StationTable:
         document = json.loads(path.read_text())
         stored, entries = document['key'], document['entries']
         digest, failures = document['digest'], document['failures']
+        failed = {(a, b): str(reason) for a, b, reason in failures}
     except FileNotFoundError:
         raise TableError(f'no table file {path}') from None
     except Exception as exc:  # noqa: B902 - any failure to parse means a corrupt file
         raise TableError(f'{path} is unreadable ({type(exc).__name__}: {exc})') from None
     if stored != key:
         raise TableError(f'{path} was built for another cell, roadmap, settings or version')
-    if _digest(entries) != digest:
+    if _digest([entries, failures]) != digest:
         raise TableError(f'{path}: its content does not match its digest')
     table = {}
     for entry in entries:
         try:
             pair = tuple(entry.pop('pair'))
-            _check_ends(planner, pair, entry)
+            _check(planner, pair, entry)
         except Exception as exc:  # noqa: B902 - a bad entry means a corrupt file
-            raise TableError(f'{path}: entry {entry.get("pair")}: {exc}') from None
+            raise TableError(f'{path}: entry {list(pair)}: {exc}') from None
         table[pair] = entry
-    return StationTable(key, table, {(a, b): reason for a, b, reason in failures},
-                        time.perf_counter() - begun, loaded=True)
+    missing = set(station_pairs(planner.cell)) - set(table) - set(failed)
+    if missing:
+        raise TableError(f'{path} lacks {len(missing)} station pairs, e.g. '
+                         f'{"->".join(sorted(missing)[0])}')
+    return StationTable(key, table, failed, time.perf_counter() - begun, loaded=True)
 
 
 def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> StationTable:
@@ -184,11 +192,18 @@ def _entry(result: PlanResult) -> dict:
     }
 
 
-def _check_ends(planner: Planner, pair, entry: dict) -> None:
-    """Raise ValueError unless the entry's curve joins the pair's stations as it says."""
-    spline = entry['trajectory']
-    points = np.asarray(spline['control_points'], float)
-    CubicBSpline(np.asarray(spline['knots'], float), points)  # well formed
+def _check(planner: Planner, pair, entry: dict) -> None:
+    """
+    Raise ValueError unless the entry's curve is fit to answer with.
+
+    It must be well formed, join the pair's stations on the branches it names, and be
+    proven collision-free in the cell now (``prove``).
+    """
+    curve = _curve(entry)
+    points = curve.control_points
+    if len(curve.knots) != len(points) + 4 or np.any(np.diff(curve.knots) < 0.0) \
+            or not np.all(np.isfinite(curve.knots)) or not np.all(np.isfinite(points)):
+        raise ValueError('its curve is not a clamped cubic B-spline')
     ends = []
     for name, branch in zip(pair, entry['branches']):
         station = planner.cell.stations[name]
@@ -196,15 +211,19 @@ def _check_ends(planner: Planner, pair, entry: dict) -> None:
                          if 'joints' in station.spec or c.elbow == branch))
     if not (np.array_equal(points[0], ends[0]) and np.array_equal(points[-1], ends[1])):
         raise ValueError('its curve does not join the two stations')
-    if not entry['verification']['proof']['certified']:
+    if not prove(curve, planner.cell.clearance_model, planner.cell.robot.lipschitz).certified:
         raise ValueError('its curve is not proven collision-free')
+
+
+def _curve(entry: dict) -> CubicBSpline:
+    spline = entry['trajectory']
+    return CubicBSpline(np.asarray(spline['knots'], float),
+                        np.asarray(spline['control_points'], float))
 
 
 def _result(planner: Planner, pair, entry: dict) -> PlanResult:
     """Return the PlanResult of a stored entry, sampled at the planner's period."""
-    spline = entry['trajectory']
-    trajectory = CubicBSpline(np.asarray(spline['knots'], float),
-                              np.asarray(spline['control_points'], float))
+    trajectory = _curve(entry)
     stored = entry['verification']
     verification = Verification(
         problems=(), ratios=stored['ratios'], min_clearance=stored['min_clearance'],

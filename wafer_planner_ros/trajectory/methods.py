@@ -2,14 +2,15 @@
 Ways to shape and time a curve through a safe corridor.
 
 The planner gives a method the corridor of every elbow-branch combination and asks for a
-``Draft`` (cheap: its ``estimate`` orders the combinations), then finishes the drafts most
-promising first, telling each the cycle time it need not beat. A method returns a curve
+``Draft`` (its ``estimate`` orders the combinations), then finishes the drafts most
+promising first, telling each the cycle time it need not beat. A finished curve that fails
+verification is replaced by its ``fallback`` when it has one. A method returns a curve
 (any ``Trajectory``) with its own figures; the planner verifies it. Methods are named by
 ``PlannerSettings.method``; ``METHODS`` lists them.
 """
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar, Mapping, Optional, Tuple
 
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
@@ -41,6 +42,9 @@ class Shaped:
     metrics: Mapping = field(default_factory=dict)
     """The method's own figures (solver iterations and the like)."""
     warnings: Tuple[str, ...] = ()
+    fallback: Optional['Shaped'] = None
+    """What to return instead if this curve fails verification (the curve it started
+    from), if anything."""
 
 
 class CurveMethod(ABC):
@@ -105,10 +109,11 @@ class WholeCurve(KnotTiming):
     """
     The control points move with the span durations (``shape.optimise_shape``).
 
-    The draft is the corridor curve with optimised knot times (``KnotTiming``: verified,
-    and near the answer, so SLSQP starts close; its cycle time orders the elbow-branch
-    combinations better than the λ-scaled start does); the curve returned is proven
-    collision-free on its own (``proof``), not by the corridor.
+    The draft is the corridor curve with optimised knot times (``KnotTiming``: feasible by
+    construction, and near the answer, so SLSQP starts close; its cycle time orders the
+    elbow-branch combinations better than the λ-scaled start does); the curve returned is
+    proven collision-free on its own (``proof``), not by the corridor, and falls back on
+    the corridor curve if it fails verification.
     """
 
     name = 'whole-curve'
@@ -133,7 +138,11 @@ class WholeCurve(KnotTiming):
         metrics = dict(timed.metrics, optimised=shaped.improved,
                        shape_iterations=shaped.iterations, shape_rounds=shaped.rounds,
                        spans=shaped.spans, corridor_cycle_time=timed.trajectory.duration)
-        return Shaped(shaped.trajectory, initial, metrics, timed.warnings + warnings)
+        fallback = replace(timed, warnings=timed.warnings + (
+            "the whole-curve optimisation's curve failed verification; returning the "
+            'corridor curve',))
+        return Shaped(shaped.trajectory, initial, metrics, timed.warnings + warnings,
+                      fallback)
 
 
 METHODS = {method.name: method for method in (KnotTiming, WholeCurve)}

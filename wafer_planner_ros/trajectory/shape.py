@@ -15,12 +15,13 @@ total time. Constraints:
   ``ShapeSettings.clearance`` (less where the start curve itself is closer, so that the
   start stays feasible).
 
-The start is a verified curve (the corridor curve, always feasible), with its knot vector
-refined first where it has few spans. SLSQP solves with exact gradients (``shape_rows``;
-clearance from the closest points and the body Jacobian). Each answer is scaled by its own
-λ (Eq. 12) to meet every limit everywhere, then proven collision-free; where a piece cannot
-be proven, clearance samples are added there and the problem is solved again. Only proven
-curves are kept: the fastest is returned, or the start when none beats it.
+The start is the corridor curve (feasible by construction: inside its boxes, λ-scaled to
+every limit), with its knot vector refined first where it has few spans. SLSQP solves with
+exact gradients (``shape_rows``; clearance from the closest points and the body Jacobian).
+Each answer is scaled by its own λ (Eq. 12) to meet every limit everywhere, then proven
+collision-free; where a piece cannot be proven, clearance samples are added there and the
+problem is solved again. Only proven curves are kept: the fastest is returned, or the
+start when none beats it.
 """
 
 from dataclasses import dataclass
@@ -78,7 +79,7 @@ def refine(curve: CubicBSpline, spans: int) -> CubicBSpline:
 
 
 class ShapeProblem:
-    """The whole-curve optimisation of one verified start curve (see the module)."""
+    """The whole-curve optimisation of one feasible start curve (see the module)."""
 
     def __init__(self, start: CubicBSpline, cell, shape: ShapeSettings,
                  timing: TimingSettings):
@@ -119,8 +120,8 @@ class ShapeProblem:
         Return the constraint values g >= 0 and their Jacobian by (points, durations).
 
         ``wafer``: (span, fraction) samples; ``clearance``: (span, fraction, body, kept)
-        samples. The Jacobian's columns
-        are every control point's coordinates (count * 3), then every duration.
+        samples. The Jacobian's columns are every control point's coordinates (count * 3),
+        then every duration.
         """
         intervals = np.ascontiguousarray(intervals, float)
         points = np.ascontiguousarray(points, float)
@@ -201,7 +202,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
                    give_up_above: Optional[float] = None,
                    deadline: Optional[float] = None) -> Optional[Shaping]:
     """
-    Return the fastest proven curve from a verified start (see the module).
+    Return the fastest proven curve from a feasible start (see the module).
 
     ``give_up_above``: a cycle time (s) this curve need not beat; None is returned as soon
     as a solve's optimum, whose samples are a subset of the final ones, exceeds it by more

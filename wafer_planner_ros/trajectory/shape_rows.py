@@ -89,9 +89,10 @@ def position_rows(padded, windows, points, span, fraction):
 
 def derivative_matrices(knots: np.ndarray, count: int, orders: int) -> list:
     """
-    Return M_o (count - o, count) with D^(o) = M_o P: the o-th derivative control points.
+    Return [M_1, M_2 (, M_3)] with D^(o) = M_o P: the derivatives' control points.
 
-    ``count``: control points; ``orders``: 2 (velocity, acceleration) or 3 (and jerk).
+    M_o (count - o, count) gives those of the o-th derivative (velocity, acceleration,
+    jerk). ``count``: control points; ``orders``: 2 (velocity, acceleration) or 3 (and jerk).
     """
     matrix = np.eye(count)
     out = []
