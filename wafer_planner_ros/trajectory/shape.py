@@ -37,6 +37,7 @@ from wafer_planner_ros.trajectory.bspline import padded_windows
 from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape_rows import derivative_matrices, LOCAL
 from wafer_planner_ros.trajectory.shape_rows import position_rows, wafer_rows_full
+from wafer_planner_ros.trajectory.timing import single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.timing_rows import control_rows
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
@@ -334,6 +335,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance, bounded
     with Jacobian entries from 1e-11 to 1e3 SLSQP's subproblem took 4.5 x as long per
     iteration (29 ms against 6.5 ms, 55 variables, 253 rows).
     """
+    single_blas_thread()
     scale = start.intervals.copy()
     free = ~problem.fixed
     columns = np.concatenate([np.repeat(free, 3), np.ones(problem.spans, bool)])

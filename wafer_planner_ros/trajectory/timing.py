@@ -38,11 +38,13 @@ Limits are tightened by ``margin`` inside the optimiser so that what lies betwee
 samples stays below the true limits that verification applies.
 """
 
+import functools
 import logging
 from typing import Optional
 
 import numpy as np
 from scipy.optimize import minimize
+from threadpoolctl import threadpool_limits
 
 from wafer_planner_ros.trajectory.timing_problem import Samples, scaled_start, Timing
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
@@ -110,6 +112,19 @@ def _peaks_over(ratio: np.ndarray, threshold: float) -> np.ndarray:
     return np.nonzero(peak)[0]
 
 
+@functools.cache
+def single_blas_thread():
+    """
+    Have BLAS (OpenBLAS under numpy and scipy) use one thread in this process, once.
+
+    The optimisers' problems are small (tens of variables, hundreds of rows): with the two
+    threads OpenBLAS starts by default, SLSQP took 5-15 x as long per solve on the 2-core
+    machine (1.75-5.9 s against 0.29-1.2 s per branch combination of the whole-curve
+    optimisation), and the threads it spins also slow every other thread of the node.
+    """
+    return threadpool_limits(limits=1, user_api='blas')
+
+
 def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
     """
     Run SLSQP from ``start``; the variables are the durations relative to ``start``.
@@ -118,6 +133,7 @@ def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows):
     on 30 random queries, 17 % fewer iterations and slightly shorter cycle times than with
     the durations themselves.
     """
+    single_blas_thread()
     scale = start.copy()
     shortest = problem.min_interval
     last = {}
