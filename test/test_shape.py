@@ -1,8 +1,9 @@
 """
 The whole-curve optimisation.
 
-Exact rows, an unchanged curve after refinement, and plans that pass the independent check
-faster than the corridor curve.
+Exact rows (and the solver's compiled copy of them), an unchanged curve after refinement,
+its SLSQP method on a problem with a known optimum, and plans that pass the independent
+check faster than the corridor curve.
 """
 
 from independent import check
@@ -13,6 +14,7 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.shape import _clearance_samples, refine, ShapeProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
@@ -34,10 +36,9 @@ def test_refinement_keeps_the_curve_exactly(corridor):
                            atol=1e-9 * 10 ** order)
 
 
-def test_every_row_and_its_jacobian_agree_with_finite_differences(default_cell, corridor):
-    """A wrong clearance, wafer or control-point derivative (by P or by h) fails here."""
-    problem = ShapeProblem(corridor.trajectory, default_cell, ShapeSettings(),
-                           TimingSettings())
+def _perturbed(cell, corridor) -> tuple:
+    """Return (problem, wafer samples, clearance samples, points, durations) off the start."""
+    problem = ShapeProblem(corridor.trajectory, cell, ShapeSettings(), TimingSettings())
     spans = problem.spans
     wafer = (np.repeat(np.arange(spans), 3), np.tile(np.arange(3) / 3, spans))
     clearance = _clearance_samples(problem, np.repeat(np.arange(spans), 4),
@@ -46,6 +47,13 @@ def test_every_row_and_its_jacobian_agree_with_finite_differences(default_cell, 
     points = problem.start.control_points.copy()
     points[3:-3] += rng.normal(0.0, 0.01, points[3:-3].shape)
     intervals = problem.start.intervals * rng.uniform(0.9, 1.1, spans) + 0.01
+    return problem, wafer, clearance, points, intervals
+
+
+def test_every_row_and_its_jacobian_agree_with_finite_differences(default_cell, corridor):
+    """A wrong clearance, wafer or control-point derivative (by P or by h) fails here."""
+    problem, wafer, clearance, points, intervals = _perturbed(default_cell, corridor)
+    spans = problem.spans
     values, jacobian = problem.rows(points, intervals, wafer, clearance)
     clearance_rows = slice(len(values) - len(clearance[0]), None)
     columns = np.concatenate([np.arange(3 * 3, 3 * (problem.count - 3)),  # free points
@@ -67,6 +75,29 @@ def test_every_row_and_its_jacobian_agree_with_finite_differences(default_cell, 
     assert worst < 1e-6
     # The clearance rows move with the control points near them: not all zero.
     assert np.abs(jacobian[clearance_rows][:, columns]).max() > 0.1
+
+
+def test_the_solver_rows_are_the_rows_in_the_solvers_columns(default_cell, corridor):
+    problem, wafer, clearance, points, intervals = _perturbed(default_cell, corridor)
+    spans, scale = problem.spans, problem.start.intervals
+    values, jacobian = problem.rows(points, intervals, wafer, clearance)
+    free = ~problem.fixed
+    expected = jacobian[:, np.concatenate([np.repeat(free, 3), np.ones(spans, bool)])]
+    expected[:, -spans:] *= scale
+    fast_values, fast_jacobian = problem.solver_rows(points, intervals, wafer, clearance, scale)
+    assert np.allclose(fast_values, values, rtol=0, atol=1e-10)
+    assert np.allclose(fast_jacobian, expected, rtol=1e-9, atol=1e-9)
+
+
+def test_the_sqp_finds_the_optimum_of_a_small_problem():
+    """Minimise x + y on the disc x^2 + y^2 <= 2 with x >= -0.5: (-0.5, -sqrt(1.75))."""
+    def rows(x):
+        return np.array([2.0 - x @ x]), -2.0 * x[None]
+
+    result = sqp.solve(rows, np.ones(2), np.zeros(2), np.array([-0.5, -np.inf]),
+                       np.full(2, np.inf), acc=1e-12)
+    assert result.converged
+    assert np.allclose(result.x, [-0.5, -np.sqrt(1.75)], atol=1e-6)
 
 
 def test_whole_curve_plans_pass_the_independent_check_and_beat_the_corridor(

@@ -53,6 +53,24 @@ def padded_windows(intervals: np.ndarray, span: np.ndarray) -> tuple:
 
 
 @njit(cache=True, nogil=True)
+def raise_degree(funcs, left, right, knots, t, j):
+    """
+    Turn the degree j - 1 basis functions at t (``funcs[:j]``) into those of degree j.
+
+    One step of the Cox-de Boor recursion (The NURBS Book, A2.2) on local ``knots``, span
+    t_3..t_4; ``left`` and ``right`` carry the distances to the knots between the steps.
+    """
+    left[j] = t - knots[DEGREE + 1 - j]
+    right[j] = knots[DEGREE + j] - t
+    saved = 0.0 * funcs[0]
+    for r in range(j):
+        temp = funcs[r] / (right[r + 1] + left[j - r])
+        funcs[r] = saved + right[r + 1] * temp
+        saved = left[j - r] * temp
+    funcs[j] = saved
+
+
+@njit(cache=True, nogil=True)
 def window_states(h, points, fraction):
     """
     Return q, q', q'', q''' (4, 3) at ``fraction`` (0..1) of a span.
@@ -73,14 +91,7 @@ def window_states(h, points, fraction):
     funcs[0] = 1.0
     out = np.zeros((DEGREE + 1, 3), dtype=h.dtype)
     for j in range(1, DEGREE + 1):
-        left[j] = t - knots[DEGREE + 1 - j]
-        right[j] = knots[DEGREE + j] - t
-        saved = 0.0 * h[0]
-        for r in range(j):
-            temp = funcs[r] / (right[r + 1] + left[j - r])
-            funcs[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        funcs[j] = saved
+        raise_degree(funcs, left, right, knots, t, j)
         # Degree-j functions weight the control points of derivative 3 - j.
         for i in range(3):
             total = 0.0 * h[0]

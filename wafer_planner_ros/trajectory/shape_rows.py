@@ -23,7 +23,7 @@ import numpy as np
 from wafer_planner_ros.geometry.kinematics import wafer_acceleration_point
 from wafer_planner_ros.trajectory.bspline import DEGREE, derivative_points, WINDOW
 from wafer_planner_ros.trajectory.bspline import knots_from_intervals
-from wafer_planner_ros.trajectory.bspline import window_states
+from wafer_planner_ros.trajectory.bspline import raise_degree, window_states
 from wafer_planner_ros.trajectory.timing_rows import COMPLEX_STEP, wafer_g
 
 LOCAL = WINDOW - 2
@@ -132,14 +132,7 @@ def basis_all(h, fraction, out):
     first = np.zeros(2, dtype=h.dtype)    # degree 1: weights of the acceleration points
     second = np.zeros(3, dtype=h.dtype)   # degree 2: weights of the velocity points
     for j in range(1, DEGREE + 1):
-        left[j] = t - knots[DEGREE + 1 - j]
-        right[j] = knots[DEGREE + j] - t
-        saved = 0.0 * h[0]
-        for r in range(j):
-            temp = funcs[r] / (right[r + 1] + left[j - r])
-            funcs[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        funcs[j] = saved
+        raise_degree(funcs, left, right, knots, t, j)
         if j == 1:
             first[0], first[1] = funcs[0], funcs[1]
         elif j == 2:
