@@ -296,3 +296,52 @@ def test_any_value_anywhere_gives_a_cell_or_a_short_cell_error(changes):
             Cell.from_dict(doc)
         except CellError as exc:
             assert len(str(exc)) < 4096
+
+
+def _fastest_by_lp(distance, v, a, j, duration, steps=400) -> bool:
+    """
+    Return whether a rest-to-rest motion over ``distance`` fits in ``duration``.
+
+    An independent answer: piecewise-constant jerk on a uniform grid, the limits at the
+    grid points, feasibility by linear programming.
+    """
+    from scipy.optimize import linprog
+    dt = duration / steps
+    # State after k steps as linear functions of the jerks u_0..u_{k-1}.
+    acc, vel, pos = np.zeros(steps), np.zeros(steps), np.zeros(steps)
+    rows_a, rows_v = [], []
+    for k in range(steps):
+        pos = pos + vel * dt + acc * dt ** 2 / 2
+        vel = vel + acc * dt
+        pos[k] += dt ** 3 / 6
+        vel[k] += dt ** 2 / 2
+        acc = acc.copy()
+        acc[k] += dt
+        rows_a.append(acc.copy())
+        rows_v.append(vel.copy())
+    upper = np.vstack(rows_a + rows_v + [-r for r in rows_a] + [-r for r in rows_v])
+    bound = np.concatenate([np.full(steps, a), np.full(steps, v)] * 2)
+    result = linprog(np.zeros(steps), A_ub=upper, b_ub=bound,
+                     A_eq=np.vstack([pos, vel, acc]), b_eq=[distance, 0.0, 0.0],
+                     bounds=[(-j, j)] * steps, method='highs')
+    return result.status == 0
+
+
+@pytest.mark.parametrize('distance, v, a, j', [
+    (0.002, 4.2, 8.4, 84.0),     # jerk alone: the acceleration limit is never reached
+    (0.4, 4.2, 8.4, 84.0),       # acceleration ramps, no cruise
+    (3.0, 4.2, 8.4, 84.0),       # ramps and a cruise at the velocity limit
+    (0.1, 1.0, 100.0, 100.0),    # the velocity limit comes before the acceleration limit
+    (1.0, 1.0, 100.0, 100.0),
+])
+def test_the_shortest_motion_is_what_an_independent_optimum_reaches(distance, v, a, j):
+    from wafer_planner_ros.cell.robot import JointLimits
+    limits = JointLimits(np.zeros((1, 2)), np.array([v]), np.array([a]), np.array([j]))
+    shortest = float(limits.shortest_motion([distance])[0])
+    assert _fastest_by_lp(distance, v, a, j, 1.01 * shortest)
+    assert not _fastest_by_lp(distance, v, a, j, 0.99 * shortest)
+    # Without a jerk limit: the same as a very large one.
+    free = JointLimits(np.zeros((1, 2)), np.array([v]), np.array([a]))
+    stiff = JointLimits(np.zeros((1, 2)), np.array([v]), np.array([a]), np.array([1e12]))
+    assert free.shortest_motion([distance])[0] == pytest.approx(
+        stiff.shortest_motion([distance])[0], rel=1e-5)

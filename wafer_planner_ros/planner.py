@@ -3,8 +3,10 @@ The planning pipeline: request -> roadmap path -> corridor -> spline -> timing -
 
 ``Planner.plan(start, goal)`` takes a station name or three joint angles for each end. When
 a station allows both elbow branches every combination is planned and the one with the
-shortest cycle time is returned (SPEC section 3); a combination whose optimisation shows it
-cannot win is given up part-way (``timing.optimise``'s ``give_up_above``). Every returned
+shortest cycle time is returned; a combination that cannot win is given up before it is
+optimised when even its joints' fastest rest-to-rest motions
+(``JointLimits.shortest_motion``) take longer than the best so far, and part-way when its
+optimisation shows it (the methods' ``give_up_above``). Every returned
 trajectory has passed ``verify``; a request that cannot be answered raises
 ``PlanningError`` with its code.
 """
@@ -218,6 +220,11 @@ class Planner:
         for pair in sorted(prepared, key=lambda p: p.draft.estimate):
             _check_deadline(deadline)
             best = min((c.shaped.trajectory.duration for c in candidates), default=None)
+            if best is not None and pair.fastest >= best:
+                logger.debug('branches %s take at least %.3f s, the best so far %.3f s; '
+                             'given up', pair.branches, pair.fastest, best)
+                given_up.append(pair)
+                continue
             candidate = self._finished(pair, best, stage_ms, until)
             if candidate is None:
                 logger.debug('branches %s cannot beat %.3f s; given up', pair.branches, best)
@@ -270,8 +277,9 @@ class Planner:
         clock.lap('corridor')
         draft = self.method.draft(corridor)
         clock.lap('spline')
+        fastest = float(self.cell.robot.limits.shortest_motion(qb - qa).max())
         return _Prepared(a, b, qa, qb, branches, roadmap_path, path,
-                         len(corridor.control_points), draft)
+                         len(corridor.control_points), draft, fastest)
 
     def _finished(self, pair: '_Prepared', give_up_above, stage_ms,
                   until=None) -> Optional['_Candidate']:
@@ -330,6 +338,8 @@ class _Prepared:
     control_points: int
     """How many control points the corridor placed."""
     draft: Draft
+    fastest: float
+    """s: no motion between the two configurations is faster (the joint limits alone)."""
 
 
 @dataclass(frozen=True, eq=False)

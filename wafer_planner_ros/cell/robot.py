@@ -29,6 +29,35 @@ class JointLimits:
     jerk: Optional[np.ndarray] = None
     """(3,) rad/s^3, optional."""
 
+    def shortest_motion(self, displacement) -> np.ndarray:
+        """
+        Return each joint's shortest rest-to-rest time (s) over ``displacement`` (rad, (3,)).
+
+        The time-optimal profile of one joint alone under its velocity, acceleration and
+        jerk limits (jerk bang-bang, ramps of acceleration and a cruise where the distance
+        allows them): no motion between two configurations is faster than the largest of
+        these, whatever its path.
+        """
+        distance = np.abs(np.asarray(displacement, float))
+        v, a = self.velocity, self.acceleration
+        if self.jerk is None:
+            cruise = distance >= v * v / a
+            with np.errstate(divide='ignore', invalid='ignore'):
+                return np.where(cruise, distance / v + v / a, 2.0 * np.sqrt(distance / a))
+        j = self.jerk
+        ramp = a / j  # s: jerk takes the acceleration from 0 to its limit
+
+        def to_speed(u):  # s: from rest to speed u, fastest
+            return np.where(u >= a * ramp, u / a + ramp, 2.0 * np.sqrt(u / j))
+
+        # Without a cruise the motion peaks at the speed u with u * to_speed(u) = distance.
+        peak = 0.5 * a * (np.sqrt(ramp * ramp + 4.0 * distance / a) - ramp)
+        without_cruise = np.where(distance >= 2.0 * a * ramp * ramp, 2.0 * (peak / a + ramp),
+                                  4.0 * np.cbrt(distance / (2.0 * j)))
+        with np.errstate(divide='ignore', invalid='ignore'):
+            return np.where(distance >= v * to_speed(v), distance / v + to_speed(v),
+                            without_cruise)
+
 
 @dataclass(frozen=True, eq=False)
 class Robot:
