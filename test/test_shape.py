@@ -1,7 +1,8 @@
 """
 The whole-curve optimisation.
 
-Exact rows (and the solver's compiled copy of them), an unchanged curve after refinement,
+Exact rows (values checked against an independent evaluation, Jacobians against finite
+differences), an unchanged curve after refinement,
 its SLSQP method on a problem with a known optimum, and plans that pass the independent
 check faster than the corridor curve.
 """
@@ -9,13 +10,16 @@ check faster than the corridor curve.
 from independent import check
 import numpy as np
 import pytest
+from scipy.interpolate import BSpline
 
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.trajectory import sqp
-from wafer_planner_ros.trajectory.shape import _clearance_samples, refine, ShapeProblem
+from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.shape import _clearance_samples
+from wafer_planner_ros.trajectory.shape_problem import CLEARANCE_SCALE, refine, ShapeProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
 
@@ -50,43 +54,59 @@ def _perturbed(cell, corridor) -> tuple:
     return problem, wafer, clearance, points, intervals
 
 
+def _rows(problem, x, wafer, clearance, scale):
+    return problem.solver_rows(*problem.unpack(x, scale), wafer, clearance, scale)
+
+
 def test_every_row_and_its_jacobian_agree_with_finite_differences(default_cell, corridor):
     """A wrong clearance, wafer or control-point derivative (by P or by h) fails here."""
     problem, wafer, clearance, points, intervals = _perturbed(default_cell, corridor)
-    spans = problem.spans
-    values, jacobian = problem.rows(points, intervals, wafer, clearance)
-    clearance_rows = slice(len(values) - len(clearance[0]), None)
-    columns = np.concatenate([np.arange(3 * 3, 3 * (problem.count - 3)),  # free points
-                              3 * problem.count + np.arange(spans)])       # durations
-    step = 1e-6
-    worst = 0.0
-    for column in columns:
-        up, down = [points.copy(), intervals.copy()], [points.copy(), intervals.copy()]
-        if column < 3 * problem.count:
-            up[0].flat[column] += step
-            down[0].flat[column] -= step
-        else:
-            up[1][column - 3 * problem.count] += step
-            down[1][column - 3 * problem.count] -= step
-        difference = (problem.rows(*up, wafer, clearance)[0]
-                      - problem.rows(*down, wafer, clearance)[0]) / (2.0 * step)
+    scale = problem.start.intervals
+    x = problem.pack(points, intervals, scale)
+    values, jacobian = _rows(problem, x, wafer, clearance, scale)
+    step, worst = 1e-6, 0.0
+    for column in range(len(x)):
+        up, down = x.copy(), x.copy()
+        up[column] += step
+        down[column] -= step
+        difference = (_rows(problem, up, wafer, clearance, scale)[0]
+                      - _rows(problem, down, wafer, clearance, scale)[0]) / (2.0 * step)
         error = np.abs(difference - jacobian[:, column]) / (1.0 + np.abs(jacobian[:, column]))
         worst = max(worst, float(error.max()))
     assert worst < 1e-6
     # The clearance rows move with the control points near them: not all zero.
-    assert np.abs(jacobian[clearance_rows][:, columns]).max() > 0.1
+    clearance_rows = slice(len(values) - len(clearance[0]), None)
+    assert np.abs(jacobian[clearance_rows]).max() > 0.1
 
 
-def test_the_solver_rows_are_the_rows_in_the_solvers_columns(default_cell, corridor):
+def test_the_rows_are_the_limits_and_clearances_they_stand_for(default_cell, corridor):
+    """Each row's value against the curve evaluated independently (scipy's B-spline)."""
     problem, wafer, clearance, points, intervals = _perturbed(default_cell, corridor)
-    spans, scale = problem.spans, problem.start.intervals
-    values, jacobian = problem.rows(points, intervals, wafer, clearance)
-    free = ~problem.fixed
-    expected = jacobian[:, np.concatenate([np.repeat(free, 3), np.ones(spans, bool)])]
-    expected[:, -spans:] *= scale
-    fast_values, fast_jacobian = problem.solver_rows(points, intervals, wafer, clearance, scale)
-    assert np.allclose(fast_values, values, rtol=0, atol=1e-10)
-    assert np.allclose(fast_jacobian, expected, rtol=1e-9, atol=1e-9)
+    values, _ = problem.solver_rows(points, intervals, wafer, clearance,
+                                    problem.start.intervals)
+    curve = CubicBSpline.from_intervals(points, intervals)
+    reference = BSpline(curve.knots, points, 3)
+    robot, margin = default_cell.robot, TimingSettings().margin
+    # Control points: velocity, acceleration, jerk, each 1 - (D / (margin limit))^2.
+    control, derivative = [], reference
+    for limit in (robot.limits.velocity, robot.limits.acceleration, robot.limits.jerk):
+        derivative = derivative.derivative()
+        inner = derivative.c[:len(derivative.t) - derivative.k - 1]
+        control.append((1.0 - (inner / (margin * limit)) ** 2).ravel())
+    control = np.concatenate(control)
+    assert np.allclose(values[:len(control)], control, atol=1e-9)
+    # The wafer acceleration on x and y at the samples.
+    span, fraction = wafer
+    t = curve.breaks()[span] + intervals[span] * fraction
+    ax, ay = robot.arm.wafer_acceleration_xy(reference(t), reference(t, 1), reference(t, 2))
+    limit = margin * robot.wafer_acceleration_limit
+    expected = np.concatenate([1.0 - (ax / limit[0]) ** 2, 1.0 - (ay / limit[1]) ** 2])
+    assert np.allclose(values[len(control):len(control) + len(expected)], expected, atol=1e-9)
+    # Clearance: (d - kept) / CLEARANCE_SCALE for the body named.
+    span, fraction, body, kept = clearance
+    t = curve.breaks()[span] + intervals[span] * fraction
+    distance = default_cell.clearance_model.body_clearance(reference(t))[np.arange(len(t)), body]
+    assert np.allclose(values[-len(t):], (distance - kept) / CLEARANCE_SCALE, atol=1e-9)
 
 
 def test_the_sqp_finds_the_optimum_of_a_small_problem():

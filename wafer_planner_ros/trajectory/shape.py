@@ -17,8 +17,8 @@ total time. Constraints:
 
 The start is the corridor curve (feasible by construction: inside its boxes, λ-scaled to
 every limit), with its knot vector refined first where it has few spans. SLSQP's method
-solves with exact gradients (``shape_rows``; clearance from the closest points and the body
-Jacobian), its quadratic subproblems by daqp (``sqp``): about 1 ms an iteration for 16
+solves with exact gradients (``shape_problem``; clearance from the closest points and the
+body Jacobian), its quadratic subproblems by daqp (``sqp``): about 1 ms an iteration for 16
 spans, where scipy's SLSQP took 4-6 ms (one BLAS thread) or 15-30 ms (two).
 Each answer is scaled by its own λ (Eq. 12) to meet every limit everywhere, then proven
 collision-free; where a piece cannot be proven, clearance samples are added there and the
@@ -34,21 +34,14 @@ from typing import Optional
 import numpy as np
 
 from wafer_planner_ros.trajectory import sqp
-from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, knots_from_intervals
-from wafer_planner_ros.trajectory.bspline import padded_windows
+from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
-from wafer_planner_ros.trajectory.shape_rows import control_rows_full, derivative_matrices
-from wafer_planner_ros.trajectory.shape_rows import LOCAL, position_rows, sample_rows
-from wafer_planner_ros.trajectory.shape_rows import scatter_rows, wafer_rows_full
+from wafer_planner_ros.trajectory.shape_problem import ShapeProblem
 from wafer_planner_ros.trajectory.timing import single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
-from wafer_planner_ros.trajectory.timing_rows import control_rows
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
 logger = logging.getLogger(__name__)
-
-CLEARANCE_SCALE = 0.01
-"""m: clearance rows are (d - kept) / this, of the order of the other rows."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,186 +56,6 @@ class Shaping:
     spans: int
     """Spans after knot refinement."""
     message: str = ''
-
-
-def refine(curve: CubicBSpline, spans: int) -> CubicBSpline:
-    """Return the same curve with its longest spans halved until it has ``spans`` (Boehm)."""
-    points, knots = curve.control_points, curve.knots
-    while len(knots) - 2 * DEGREE - 1 < spans:
-        widths = np.diff(knots[DEGREE:-DEGREE])
-        s = int(np.argmax(widths))
-        at, k = knots[DEGREE + s] + 0.5 * widths[s], DEGREE + s
-        new = np.empty((len(points) + 1, points.shape[1]))
-        new[:k - DEGREE + 1] = points[:k - DEGREE + 1]
-        new[k + 1:] = points[k:]
-        for i in range(k - DEGREE + 1, k + 1):
-            alpha = (at - knots[i]) / (knots[i + DEGREE] - knots[i])
-            new[i] = alpha * points[i] + (1.0 - alpha) * points[i - 1]
-        points, knots = new, np.insert(knots, k + 1, at)
-    return CubicBSpline(knots, points)
-
-
-class ShapeProblem:
-    """The whole-curve optimisation of one feasible start curve (see the module)."""
-
-    def __init__(self, start: CubicBSpline, cell, shape: ShapeSettings,
-                 timing: TimingSettings):
-        """Refine the start curve's knots and set up the problem for ``cell``'s robot."""
-        self.cell, self.settings, self.timing = cell, shape, timing
-        self.robot, self.model = cell.robot, cell.clearance_model
-        self.start = refine(start, shape.min_spans)
-        self.count = len(self.start.control_points)
-        self.spans = self.count - DEGREE
-        limits = self.robot.limits
-        orders = [limits.velocity, limits.acceleration] + (
-            [limits.jerk] if limits.jerk is not None else [])
-        self._control_limits = timing.margin * np.array(orders, float)
-        wafer = self.robot.wafer_acceleration_limit
-        self._wafer_limits = timing.margin * np.array(
-            [wafer[0], wafer[1], self.robot.wafer_acceleration_norm_limit or 0.0])
-        self.min_interval = timing.shortest(self.robot)
-        self.fixed = np.zeros(self.count, dtype=bool)
-        self.fixed[:DEGREE] = self.fixed[-DEGREE:] = True
-        free = int((~self.fixed).sum())
-        self._point_column = -np.ones((self.count, 3), np.int64)  # the solver's columns
-        self._point_column[~self.fixed] = np.arange(3 * free).reshape(free, 3)
-        self._duration_column = 3 * free + np.arange(self.spans)
-
-    # ------------------------------------------------------------ variables
-
-    def pack(self, points: np.ndarray, intervals: np.ndarray, scale: np.ndarray):
-        """Return x: the free control points, then the durations relative to ``scale``."""
-        return np.concatenate([points[~self.fixed].ravel(), intervals / scale])
-
-    def unpack(self, x: np.ndarray, scale: np.ndarray) -> tuple:
-        """Return (control points, durations) of x."""
-        points = self.start.control_points.copy()
-        free = int((~self.fixed).sum())
-        points[~self.fixed] = x[:3 * free].reshape(free, 3)
-        return points, x[3 * free:] * scale
-
-    # ------------------------------------------------------------ rows
-
-    def rows(self, points, intervals, wafer, clearance) -> tuple:
-        """
-        Return the constraint values g >= 0 and their Jacobian by (points, durations).
-
-        ``wafer``: (span, fraction) samples; ``clearance``: (span, fraction, body, kept)
-        samples. The Jacobian's columns are every control point's coordinates (count * 3),
-        then every duration.
-        """
-        intervals = np.ascontiguousarray(intervals, float)
-        points = np.ascontiguousarray(points, float)
-        columns = 3 * self.count + self.spans
-        values, blocks = [], []
-        # Control points: linear in P for given durations.
-        control, by_h = control_rows(intervals, points, self._control_limits, True)
-        knots = knots_from_intervals(intervals)
-        by_p = []
-        for order, matrix in enumerate(derivative_matrices(knots, self.count,
-                                                           len(self._control_limits))):
-            limit = self._control_limits[order]
-            ratio = (matrix @ points) / limit                        # (n_o, 3)
-            coef = -2.0 * ratio / limit                              # dg/dD
-            block = np.zeros((len(matrix), 3, self.count, 3))
-            for j in range(3):
-                block[:, j, :, j] = coef[:, j, None] * matrix
-            by_p.append(block.reshape(3 * len(matrix), 3 * self.count))
-        jac = np.hstack([np.vstack(by_p), by_h])
-        values.append(control)
-        blocks.append(jac)
-        # Wafer acceleration at samples.
-        span, fraction = wafer
-        if len(span):
-            padded, windows = padded_windows(intervals, span)
-            g, g_h, g_p = wafer_rows_full(padded, windows, points, span, fraction,
-                                          self.robot.arm.link_lengths, self._wafer_limits)
-            parts = len(g)
-            block = np.zeros((parts, len(span), columns))
-            rows_index = np.arange(len(span))
-            for j in range(DEGREE + 1):
-                for i in range(3):
-                    block[:, rows_index, 3 * (span + j) + i] = g_p[:, :, j, i]
-            for d in range(LOCAL):
-                column = span + d - 2  # h_{s-2+d}; beyond the ends it does not exist
-                inside = (column >= 0) & (column < self.spans)
-                block[:, rows_index[inside], 3 * self.count + column[inside]] = \
-                    g_h[:, inside, d]
-            values.append(g.ravel())
-            blocks.append(block.reshape(parts * len(span), columns))
-        # Clearance at samples: the body Jacobian through the basis.
-        span, fraction, body, kept = clearance
-        if len(span):
-            d, d_h, basis = self._clearance(points, intervals, span, fraction, body)
-            value, grad = d
-            block = np.zeros((len(span), columns))
-            rows_index = np.arange(len(span))
-            for j in range(DEGREE + 1):
-                for i in range(3):
-                    block[rows_index, 3 * (span + j) + i] = basis[:, j] * grad[:, i]
-            for k in range(LOCAL):
-                column = span + k - 2
-                inside = (column >= 0) & (column < self.spans)
-                block[rows_index[inside], 3 * self.count + column[inside]] = \
-                    d_h[inside, k]
-            values.append((value - kept) / CLEARANCE_SCALE)
-            blocks.append(block / CLEARANCE_SCALE)
-        return np.concatenate(values), np.vstack(blocks)
-
-    def solver_rows(self, points, intervals, wafer, clearance, scale) -> tuple:
-        """
-        Return the rows of ``rows`` and their Jacobian by the solver's variables (``pack``).
-
-        The same values (to rounding) from the compiled pass of ``shape_rows.sample_rows``:
-        columns are the free control points' coordinates, then the durations relative to
-        ``scale``.
-        """
-        points = np.ascontiguousarray(points, float)
-        intervals = np.ascontiguousarray(intervals, float)
-        scale = np.ascontiguousarray(scale, float)
-        padded = np.concatenate([np.zeros(DEGREE), intervals, np.zeros(DEGREE)])
-        (wafer_span, wafer_fraction), (span, fraction, body, kept) = wafer, clearance
-        parts = 3 if self._wafer_limits[2] > 0.0 else 2
-        control = sum(3 * (self.count - 1 - order) for order in range(len(self._control_limits)))
-        rows = control + parts * len(wafer_span) + len(span)
-        values = np.empty(rows)
-        jacobian = np.zeros((rows, 3 * int((~self.fixed).sum()) + self.spans))
-        columns = (self._point_column, self._duration_column, scale)
-        row = control_rows_full(points, intervals, self._control_limits, *columns, values,
-                                jacobian)
-        links = np.asarray(self.robot.arm.link_lengths, float)
-        if len(wafer_span):
-            local = sample_rows(padded, points, wafer_span, wafer_fraction, links,
-                                self._wafer_limits, False)
-            scatter_rows(jacobian, values, row, *local, wafer_span, *columns)
-            row += parts * len(wafer_span)
-        if len(span):
-            q, q_h, q_p = sample_rows(padded, points, span, fraction, links,
-                                      self._wafer_limits, True)
-            distance, gradient = self.model.body_clearance_gradient(np.ascontiguousarray(q.T))
-            k = np.arange(len(span))
-            distance, gradient = distance[k, body], gradient[k, body]      # (K,), (K, 3)
-            by_h = np.einsum('ikd,ki->kd', q_h, gradient)
-            by_p = q_p[0, :, :, 0][:, :, None] * gradient[:, None, :]      # (K, 4, 3)
-            scatter_rows(jacobian, values, row, ((distance - kept) / CLEARANCE_SCALE)[None],
-                         by_h[None] / CLEARANCE_SCALE, by_p[None] / CLEARANCE_SCALE, span,
-                         *columns)
-        return values, jacobian
-
-    def _clearance(self, points, intervals, span, fraction, body) -> tuple:
-        """Return ((clearance, gradient by q), d clearance / dh (K, 5), basis (K, 4))."""
-        padded, windows = padded_windows(intervals, span)
-        q, q_h, basis = position_rows(padded, windows, points, span, fraction)
-        clearance, gradient = self.model.body_clearance_gradient(q)
-        rows = np.arange(len(span))
-        value, grad = clearance[rows, body], gradient[rows, body]      # (K,), (K, 3)
-        return (value, grad), np.einsum('kdi,ki->kd', q_h, grad), basis
-
-    def clearances(self, curve: CubicBSpline, span, fraction) -> np.ndarray:
-        """Return every body's clearance (K, 4) at samples of a curve of this problem."""
-        padded, windows = padded_windows(curve.intervals, span)
-        q = position_rows(padded, windows, curve.control_points, span, fraction)[0]
-        return self.model.body_clearance(q)
 
 
 def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettings(),

@@ -19,12 +19,12 @@ Variables: the durations h of the spline's spans. Objective: the total time sum(
 
 The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ computed from a
 dense sample of the wafer acceleration so that it is feasible everywhere; SLSQP then solves
-with exact gradients. They come by the complex step: every constraint is an analytic
-function of h (the B-spline recursion and the kinematics use plain arithmetic), so
-``Im g(h + i ε e_k) / ε`` is dg/dh_k to machine precision — there is no difference to cancel,
-unlike finite differences. A wafer sample in span s depends on h_{s-2}..h_{s+2} only, so
-its row of the Jacobian takes five complex evaluations of its own spline window (compiled,
-``timing_rows``); the control-point rows are Eq. 6-7 differentiated in closed form.
+with exact gradients (compiled, ``rows``): the control-point rows are Eq. 6-7
+differentiated in closed form; a wafer sample in span s depends on h_{s-2}..h_{s+2} only,
+and its derivatives come by the complex step on the spline's basis (every function is
+analytic, so ``Im B(h + i ε e_k) / ε`` is dB/dh_k to machine precision — there is no
+difference to cancel, unlike finite differences) through the kinematics' closed-form
+partials.
 
 **Beyond the paper**: sampling the wafer acceleration at the knots lets it exceed the limit
 between them. Every answer of the solver is therefore checked densely (every ``dense_step``

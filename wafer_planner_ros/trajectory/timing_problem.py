@@ -13,7 +13,7 @@ import numpy as np
 
 from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, derivative_points
 from wafer_planner_ros.trajectory.bspline import knots_from_intervals, padded_windows, WINDOW
-from wafer_planner_ros.trajectory.timing_rows import control_rows, wafer_rows
+from wafer_planner_ros.trajectory.rows import control_row_count, control_rows, sample_rows
 from wafer_planner_ros.trajectory.tuning import TimingSettings
 
 
@@ -72,6 +72,7 @@ class TimingProblem:
         self._control_limits = settings.margin * np.array(orders, float)
         self._wafer_limits = settings.margin * np.array([self.wafer[0], self.wafer[1],
                                                          self.wafer_norm or 0.0])
+        self._fixed = -np.ones((len(self.points), 3), np.int64)  # no control point moves
 
     def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
         """Return the samples at ``fraction`` (0..1) of the given spans."""
@@ -92,8 +93,7 @@ class TimingProblem:
 
     def control_constraints(self, intervals) -> np.ndarray:
         """Return the control-point constraints g >= 0, velocity then acceleration (, jerk)."""
-        return control_rows(np.ascontiguousarray(intervals, float), self.points,
-                            self._control_limits, False)[0]
+        return self._control(intervals, False)[0]
 
     def wafer_constraints(self, intervals: np.ndarray, samples: Samples) -> np.ndarray:
         """Return the wafer constraints g >= 0 at the samples: x, y (, |a|), (c * K,)."""
@@ -113,19 +113,28 @@ class TimingProblem:
     def linearise(self, intervals: np.ndarray, samples: Samples, rows=None) -> tuple:
         """Return the constraint values and their exact Jacobian (rows, m)."""
         intervals = np.ascontiguousarray(intervals, float)
-        control, control_jacobian = control_rows(intervals, self.points,
-                                                 self._control_limits, True)
+        control, control_jacobian = self._control(intervals, True)
         if rows is not None:
             control, control_jacobian = control[rows], control_jacobian[rows]
         values, jacobian = self._wafer(intervals, samples, True)
         return (np.concatenate([control, values]), np.vstack([control_jacobian, jacobian]))
 
+    def _control(self, intervals, gradients: bool) -> tuple:
+        """Return the control-point constraint values and, if asked, their Jacobian (R, m)."""
+        intervals = np.ascontiguousarray(intervals, float)
+        m = len(intervals)
+        values = np.empty(control_row_count(len(self.points), len(self._control_limits)))
+        jacobian = np.zeros((len(values), m if gradients else 0))
+        control_rows(self.points, intervals, self._control_limits, self._fixed, np.arange(m),
+                     np.ones(m), values, jacobian, gradients)
+        return values, jacobian
+
     def _wafer(self, intervals: np.ndarray, samples: Samples, gradients: bool) -> tuple:
         """Return the wafer constraint values (c * K,) and, if asked, their Jacobian."""
         padded, windows = padded_windows(np.asarray(intervals, float), samples.span)
-        values, local = wafer_rows(padded, windows, self.points, samples.span,
-                                   samples.fraction, self.arm.link_lengths,
-                                   self._wafer_limits, gradients)
+        values, local, _ = sample_rows(padded, self.points, samples.span, samples.fraction,
+                                       self.arm.link_lengths, self._wafer_limits, False,
+                                       gradients)
         parts = len(values)
         if not gradients:
             return values.ravel(), None

@@ -1,116 +1,97 @@
 """
-The compiled rows of the whole-curve optimisation: values and exact Jacobians.
+The compiled constraint rows of both optimisations, with exact Jacobians.
 
-A point of span s depends on the control points P_s..P_{s+3} and the durations
-h_{s-2}..h_{s+2} (``bspline.window_states``). Every row here is an analytic function of
-both, so the complex step gives exact derivatives: by each of the five durations and, for
-the wafer rows, by each of the twelve control-point coordinates. Positions are linear in
-the control points: their weights are the basis functions, evaluated by the same recursion
-on unit control points. Control-point rows (velocity, acceleration, jerk) are linear in P
-for given durations: ``derivative_matrices`` gives the matrices.
-
-The solver's rows come from a cheaper pass (``solver_rows``, the Jacobian written straight
-into the solver's columns): q^(r) = sum_j B^(r)_j(h) P_{s+j} (r = 0, 1, 2), so
-dg/dP_{s+j,i} = sum_r dg/dq^(r)_i B^(r)_j with the kinematics' partials in closed form,
-and dg/dh = sum_{r,i} dg/dq^(r)_i sum_j dB^(r)_j/dh P_{s+j,i} with dB/dh by the complex
-step on the basis alone: five passes of a small recursion per sample instead of seventeen
-evaluations of the states and the kinematics (4 x faster rows, the same values to 1e-12).
+Rows are g >= 0. Control-point rows (velocity, acceleration, jerk: ``control_rows``) are
+Eq. 6-7 differentiated in closed form. Sample rows (the wafer acceleration or the joint
+positions at a (span, fraction) sample: ``sample_rows``) depend on the control points
+P_s..P_{s+3} and the durations h_{s-2}..h_{s+2} of the sample's span s: with
+q^(r) = sum_j B^(r)_j(h) P_{s+j} (r = 0, 1, 2), dg/dP_{s+j,i} = sum_r dg/dq^(r)_i B^(r)_j
+with the kinematics' partials in closed form, and
+dg/dh = sum_{r,i} dg/dq^(r)_i sum_j dB^(r)_j/dh P_{s+j,i} with dB/dh by the complex step
+on the basis alone: every function is analytic, so ``Im B(h + i e e_k) / e`` is exact to
+rounding. ``scatter_rows`` writes sample rows into a solver's columns. The knot-time
+optimisation (``timing_problem``) uses the duration columns alone; the whole-curve
+optimisation (``shape_problem``) the control points' as well.
 """
 
 from numba import njit
 import numpy as np
 
-from wafer_planner_ros.geometry.kinematics import wafer_acceleration_point
-from wafer_planner_ros.trajectory.bspline import DEGREE, derivative_points, WINDOW
-from wafer_planner_ros.trajectory.bspline import knots_from_intervals
-from wafer_planner_ros.trajectory.bspline import raise_degree, window_states
-from wafer_planner_ros.trajectory.timing_rows import COMPLEX_STEP, wafer_g
+from wafer_planner_ros.trajectory.bspline import DEGREE, knots_from_intervals, raise_degree
+from wafer_planner_ros.trajectory.bspline import WINDOW
 
+COMPLEX_STEP = 1e-30
+"""Far below rounding, so Im f(h + i step) / step is df/dh exactly."""
 LOCAL = WINDOW - 2
 """Durations a sample depends on: h_{s-2}..h_{s+2}."""
 
 
 @njit(cache=True, nogil=True)
-def wafer_rows_full(padded, windows, points, span, fraction, link_lengths, limits):
+def control_rows(points, intervals, limits, point_column, duration_column, scale,
+                 values_out, jacobian, gradients=True):
     """
-    Return the wafer constraints (c, K), d/dh (c, K, 5) and d/dP (c, K, 4, 3).
+    Write the control-point rows 1 - (D / limit)^2 of every order and their Jacobian.
 
-    ``limits``: x, y, |a| limits with the margin (|a| absent when 0). The derivatives are by
-    h_{s-2}..h_{s+2} and by P_s..P_{s+3} of each sample's span s.
+    Rows: every velocity, then acceleration (then jerk) control point's joints; ``limits``
+    (orders, 3) hold the margin. Eq. 6-7 differentiated: D'_i = d (D_{i+1} - D_i) / w_i
+    with w_i = h_{i+o-2} + ... + h_i for the o-th derivative points D (degree d = 3 - o), so
+    dD'_i/dh_k = (d (dD_{i+1} - dD_i) - D'_i [k in w_i]) / w_i, and dD'_i/dP by the same
+    recursion (per joint). Columns as in ``scatter_rows``; with every ``point_column`` -1
+    (the control points fixed) only the durations are carried, and without ``gradients``
+    nothing. Returns the number of rows written.
     """
-    parts = 3 if limits[2] > 0.0 else 2
-    values = np.empty((parts, len(span)))
-    by_h = np.zeros((parts, len(span), LOCAL))
-    by_p = np.zeros((parts, len(span), DEGREE + 1, 3))
-    window = np.empty(WINDOW, dtype=np.complex128)
-    local = np.empty((DEGREE + 1, 3), dtype=np.complex128)
-    for k in range(len(span)):
-        h = padded[windows[k]]
-        p = points[span[k]:span[k] + DEGREE + 1]
-        for d in range(LOCAL + 3 * (DEGREE + 1)):
-            window[:] = h
-            local[:] = p
-            if d < LOCAL:
-                window[d + 1] += 1j * COMPLEX_STEP
-            else:
-                local[(d - LOCAL) // 3, (d - LOCAL) % 3] += 1j * COMPLEX_STEP
-            state = window_states(window, local, fraction[k])
-            g = wafer_g(*wafer_acceleration_point(link_lengths, state[0], state[1],
-                                                  state[2]), limits)
-            for c in range(parts):
-                values[c, k] = g[c].real
-                if d < LOCAL:
-                    by_h[c, k, d] = g[c].imag / COMPLEX_STEP
-                else:
-                    by_p[c, k, (d - LOCAL) // 3, (d - LOCAL) % 3] = g[c].imag / COMPLEX_STEP
-    return values, by_h, by_p
+    count, m = len(points), len(intervals)
+    moving = gradients and point_column.max() >= 0
+    knots = knots_from_intervals(intervals)
+    current = points.copy()
+    by_p = np.eye(count)                    # d current[i] / d P[k], the same joint
+    by_h = np.zeros((count, 3, m))
+    row = 0
+    for order in range(len(limits)):
+        degree = DEGREE - order
+        n = len(current) - 1
+        following = np.empty((n, 3))
+        following_p = np.zeros((n, count))
+        following_h = np.zeros((n, 3, m))
+        for i in range(n):
+            width = knots[i + 4] - knots[i + 1 + order]
+            factor = degree / width
+            for j in range(3):
+                following[i, j] = factor * (current[i + 1, j] - current[i, j])
+            if not gradients:
+                continue
+            if moving:
+                for k in range(count):
+                    following_p[i, k] = factor * (by_p[i + 1, k] - by_p[i, k])
+            for k in range(m):
+                inside = i + order - 2 <= k <= i
+                for j in range(3):
+                    d = degree * (by_h[i + 1, j, k] - by_h[i, j, k])
+                    if inside:
+                        d -= following[i, j]
+                    following_h[i, j, k] = d / width
+        for i in range(n):
+            for j in range(3):
+                ratio = following[i, j] / limits[order, j]
+                values_out[row] = 1.0 - ratio * ratio
+                row += 1
+                if not gradients:
+                    continue
+                coef = -2.0 * ratio / limits[order, j]
+                for k in range(count if moving else 0):
+                    column = point_column[k, j]
+                    if column >= 0 and following_p[i, k] != 0.0:
+                        jacobian[row - 1, column] = coef * following_p[i, k]
+                for k in range(m):
+                    jacobian[row - 1, duration_column[k]] = \
+                        coef * following_h[i, j, k] * scale[k]
+        current, by_p, by_h = following, following_p, following_h
+    return row
 
 
-@njit(cache=True, nogil=True)
-def position_rows(padded, windows, points, span, fraction):
-    """
-    Return q (K, 3), dq/dh (K, 5, 3) and the basis weights (K, 4) at the samples.
-
-    q = sum_j basis[j] P_{s+j}; the weights do not depend on P.
-    """
-    q = np.empty((len(span), 3))
-    by_h = np.zeros((len(span), LOCAL, 3))
-    basis = np.empty((len(span), DEGREE + 1))
-    window = np.empty(WINDOW, dtype=np.complex128)
-    unit = np.zeros((DEGREE + 1, 3))
-    for k in range(len(span)):
-        h = padded[windows[k]]
-        p = points[span[k]:span[k] + DEGREE + 1]
-        for d in range(LOCAL):
-            window[:] = h
-            window[d + 1] += 1j * COMPLEX_STEP
-            state = window_states(window, p.astype(np.complex128), fraction[k])
-            for i in range(3):
-                q[k, i] = state[0, i].real
-                by_h[k, d, i] = state[0, i].imag / COMPLEX_STEP
-        for j in range(DEGREE + 1):
-            unit[:] = 0.0
-            unit[j] = 1.0
-            basis[k, j] = window_states(h, unit, fraction[k])[0, 0]
-    return q, by_h, basis
-
-
-def derivative_matrices(knots: np.ndarray, count: int, orders: int) -> list:
-    """
-    Return [M_1, M_2 (, M_3)] with D^(o) = M_o P: the derivatives' control points.
-
-    M_o (count - o, count) gives those of the o-th derivative (velocity, acceleration,
-    jerk). ``count``: control points; ``orders``: 2 (velocity, acceleration) or 3 (and jerk).
-    """
-    matrix = np.eye(count)
-    out = []
-    for order in range(orders):
-        matrix = derivative_points(matrix, knots[order:len(knots) - order], DEGREE - order)
-        out.append(matrix)
-    return out
-
-
-# ---------------------------------------------------------------- the solver's rows
+def control_row_count(count: int, orders: int) -> int:
+    """Return how many rows ``control_rows`` writes for ``count`` control points."""
+    return sum(3 * (count - 1 - order) for order in range(orders))
 
 
 @njit(cache=True, nogil=True)
@@ -187,13 +168,15 @@ def _kinematic_partials(link_lengths, q, qd, qdd, dax, day):
 
 
 @njit(cache=True, nogil=True)
-def sample_rows(padded, points, span, fraction, link_lengths, limits, positions):
+def sample_rows(padded, points, span, fraction, link_lengths, limits, positions,
+                gradients=True):
     """
     Return per sample (values (c, K), d/dh (c, K, 5), d/dP (c, K, 4, 3)).
 
     The wafer constraints 1 - (a / limit)^2 on x, y (and |a|, when ``limits[2]`` > 0), or,
     with ``positions``, the joint positions q (c = 3 joints; d/dP holds the basis weight
-    of P_{s+j} in column 0). Derivatives are by h_{s-2}..h_{s+2} and P_s..P_{s+3}.
+    of P_{s+j} in column 0). Derivatives are by h_{s-2}..h_{s+2} and P_s..P_{s+3}; without
+    ``gradients`` they stay zero. ``padded``: the durations with three zeros at each end.
     """
     count = len(span)
     parts = 3 if positions or limits[2] > 0.0 else 2
@@ -217,9 +200,12 @@ def sample_rows(padded, points, span, fraction, link_lengths, limits, positions)
                     total += basis[r, j] * points[s + j, i]
                 state[r, i] = total
         if positions:
-            dg[:] = 0.0
             for i in range(3):
                 values[i, k] = state[0, i]
+            if not gradients:
+                continue
+            dg[:] = 0.0
+            for i in range(3):
                 dg[i, 0, i] = 1.0
                 for j in range(DEGREE + 1):
                     by_p[i, k, j, 0] = basis[0, j]
@@ -238,6 +224,8 @@ def sample_rows(padded, points, span, fraction, link_lengths, limits, positions)
                 for r in range(3):
                     for i in range(3):
                         dg[2, r, i] = -2.0 * (ax * dax[r, i] + ay * day[r, i]) / square
+            if not gradients:
+                continue
             for c in range(parts):
                 for j in range(DEGREE + 1):
                     for i in range(3):
@@ -290,55 +278,3 @@ def scatter_rows(jacobian, values_out, row0, values, by_h, by_p, span, point_col
                     column = point_column[s + j, i]
                     if column >= 0:
                         jacobian[row, column] = by_p[c, k, j, i]
-
-
-@njit(cache=True, nogil=True)
-def control_rows_full(points, intervals, limits, point_column, duration_column, scale,
-                      values_out, jacobian):
-    """
-    Write the control-point rows 1 - (D / limit)^2 of every order and their Jacobian.
-
-    D^(o+1)_i = d (D^(o)_{i+1} - D^(o)_i) / w_i with w_i = knots[i+4] - knots[i+1+o]
-    (``timing_rows.control_rows``); their derivatives by P (per joint) and by h are carried
-    along. Returns the number of rows written.
-    """
-    count, m = len(points), len(intervals)
-    knots = knots_from_intervals(intervals)
-    current = points.copy()
-    by_p = np.eye(count)                    # d current[i] / d P[k], the same joint
-    by_h = np.zeros((count, 3, m))
-    row = 0
-    for order in range(len(limits)):
-        degree = DEGREE - order
-        n = len(current) - 1
-        following = np.empty((n, 3))
-        following_p = np.zeros((n, count))
-        following_h = np.zeros((n, 3, m))
-        for i in range(n):
-            width = knots[i + 4] - knots[i + 1 + order]
-            factor = degree / width
-            for j in range(3):
-                following[i, j] = factor * (current[i + 1, j] - current[i, j])
-            for k in range(count):
-                following_p[i, k] = factor * (by_p[i + 1, k] - by_p[i, k])
-            for k in range(m):
-                inside = i + order - 2 <= k <= i
-                for j in range(3):
-                    d = degree * (by_h[i + 1, j, k] - by_h[i, j, k])
-                    if inside:
-                        d -= following[i, j]
-                    following_h[i, j, k] = d / width
-        for i in range(n):
-            for j in range(3):
-                ratio = following[i, j] / limits[order, j]
-                values_out[row] = 1.0 - ratio * ratio
-                coef = -2.0 * ratio / limits[order, j]
-                for k in range(count):
-                    column = point_column[k, j]
-                    if column >= 0 and following_p[i, k] != 0.0:
-                        jacobian[row, column] = coef * following_p[i, k]
-                for k in range(m):
-                    jacobian[row, duration_column[k]] = coef * following_h[i, j, k] * scale[k]
-                row += 1
-        current, by_p, by_h = following, following_p, following_h
-    return row
