@@ -4,8 +4,9 @@ Cycle times against the MoveIt-style peer and the physical yardstick, per statio
 For every station pair of the default cell and both test cells, and every roadmap seed:
 the paper's pipeline (``PlannerSettings.paper()``), the corridor pipeline with optimised
 knot times (method ``knot-timing``), the whole-curve optimisation (method
-``whole-curve``), the peer (``peer.Peer``: OMPL PRM with 1500 milestones, simplification,
-an interpolating cubic, TOPP-RA) and the per-axis wafer bound
+``whole-curve``), the same within the node's default ``planning.optimise_budget``, the
+peer (``peer.Peer``: OMPL PRM with 1500 milestones, simplification, an interpolating
+cubic, TOPP-RA) and the per-axis wafer bound
 2 max(sqrt(|dx| / a_x), sqrt(|dy| / a_y)) of the wafer centre's displacement (bang-bang on
 each axis, everything else ignored: no motion is faster). Cycle time, planning ms and
 peak joint jerk for each; ratios to the peer. Writes ``results/cycle.json``.
@@ -30,13 +31,18 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.settings import settings_from
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'cycle.json'
 CELLS = {'default': default_cell_path(), 'pillar': HERE.parent / 'test' / 'cells' / 'pillar.yaml',
          'notched': HERE.parent / 'test' / 'cells' / 'notched.yaml'}
 OURS = {'paper': PlannerSettings.paper(), 'corridor': PlannerSettings(method='knot-timing'),
-        'ours': PlannerSettings(method='whole-curve')}
+        'ours': PlannerSettings(method='whole-curve'),
+        'budget': PlannerSettings(method='whole-curve')}
+BUDGET = settings_from({}).optimise_budget
+"""s: 'budget' is the whole-curve optimisation within the node's default budget (what a
+request the station table does not hold gets)."""
 
 
 def wafer_bound(cell, start: str, goal: str) -> float:
@@ -49,15 +55,17 @@ def wafer_bound(cell, start: str, goal: str) -> float:
     return float(2.0 * np.max(np.sqrt(np.abs(b - a) / limit)))
 
 
-def ours(planner: Planner, start: str, goal: str, reference: bool = False) -> dict:
+def ours(planner: Planner, start: str, goal: str, reference: bool = False,
+         budget=None) -> dict:
     """
     Return our plan's cycle time, planning ms and peak jerk (or its error).
 
-    ``reference``: also TOPP-RA's time-optimal timing of the very same curve.
+    ``reference``: also TOPP-RA's time-optimal timing of the very same curve; ``budget``:
+    seconds of optimisation (``Planner.plan``).
     """
     started = time.perf_counter()
     try:
-        result = planner.plan(start, goal)
+        result = planner.plan(start, goal, budget=budget)
     except PlanningError as exc:
         return {'duration': None, 'planning_ms': (time.perf_counter() - started) * 1000.0,
                 'code': exc.code.value, 'reason': exc.message}
@@ -82,7 +90,8 @@ def run(name: str, seed: int) -> dict:
     for start, goal in station_pairs(cell):
         row = {'from': start, 'to': goal, 'bound': wafer_bound(cell, start, goal)}
         for key, planner in planners.items():
-            row[key] = ours(planner, start, goal, reference=key == 'ours')
+            row[key] = ours(planner, start, goal, reference=key == 'ours',
+                            budget=BUDGET if key == 'budget' else None)
         row['peer'] = peer.plan_stations(start, goal)
         rows.append(row)
         _print_row(row)

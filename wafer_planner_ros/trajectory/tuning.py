@@ -59,9 +59,6 @@ class ShapeSettings:
     curve between them)."""
     watch: float = 0.05
     """m: bodies this near a wall at a sample have their clearance constrained there."""
-    near_limit: float = 0.3
-    """rad: control points this near a position limit at the start of a solve are bounded
-    by it in the solver; the others are checked afterwards."""
     max_rounds: int = 6
     """Solves at most, each after adding samples where the last answer fell short."""
     max_iterations: int = 100
