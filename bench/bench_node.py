@@ -1,23 +1,27 @@
 """
 Benchmark: the planning node as a process, asked over DDS on loopback.
 
-0. The station table: how long after the roadmap serves it is ready (loaded from the
-   cache, or planned at a cold start), before anything is measured.
-1. End-to-end latency, one request at a time (every directed station pair three times and
-   50 random free joint requests, optimised within ``planning.optimise_budget``): request
-   publish to result receipt, against the planning time the node itself reports (the core
-   planner's ``timings_ms['total']``). After a warm-up pass, every request is asked twice
-   with recording on and twice off
-   (``~/set_recording``, in turns block by block); what recording costs is the median over
-   requests of (on - off) for the same request.
+0. The station table at a cold start (an empty cache directory): how long after the
+   roadmap serves it is planned, before anything is measured; then, in process, how long
+   loading it from the cache takes.
+1. End-to-end latency, one request at a time (every directed station pair three times,
+   answered from the table, and 200 random free joint requests, optimised within
+   ``planning.optimise_budget``): request publish to result receipt, against the planning
+   time the node itself reports (the core planner's ``timings_ms['total']``), for each kind
+   apart. After a warm-up pass, every request is asked twice with recording on and twice
+   off (``~/set_recording``, in turns block by block); what recording costs is the median
+   over requests of (on - off) for the same request. The joint requests' cycle times are
+   compared with the unbudgeted whole-curve optimisation of the same pairs (in process,
+   after the node has stopped).
 2. A burst of 200 station requests from 4 publishers at once, recording on: every result
    received, none lost or duplicated, how many were BUSY, ``~/get_status`` round trips
    throughout, and every request and result in the recording.
 3. The node's resident memory.
 Prints a table; writes ``bench/results/node.json``. Usage: ``make bench`` or
-``python bench/bench_node.py``.
+``python bench/bench_node.py [--joints N]``.
 """
 
+import argparse
 import gc
 import json
 import os
@@ -41,8 +45,12 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.reading import read
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.table import load_table
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'node.json'
 BURST, PUBLISHERS = 200, 4
@@ -106,14 +114,19 @@ class Peer(Node):
 
 def main() -> int:
     """Run the benchmark."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--joints', type=int, default=200, help='random joint requests')
+    args = parser.parse_args()
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_DOMAIN_ID=str(150 + os.getpid() % 50))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                       ROS_DOMAIN_ID=env['ROS_DOMAIN_ID'])
     recordings = tempfile.mkdtemp(prefix='bench_recordings_')
+    cache = tempfile.mkdtemp(prefix='bench_cache_')  # a cold start: roadmap and table
     node = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.planner_node',
                              '--ros-args', '-p', 'planning.timeout:=60.0',
                              '-p', f'planning.max_queue:={BURST + 10}',
+                             '-p', f'roadmap.cache_dir:={cache}',
                              '-p', f'recording.directory:={recordings}'],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     rclpy.init()
@@ -122,8 +135,10 @@ def main() -> int:
     executor.add_node(peer)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
+    cell = Cell.from_yaml(default_cell_path())
+    joints = random_pairs(cell, args.joints)
     try:
-        report = run(peer)
+        report = run(peer, cell, joints)
         report['node_memory_mb'] = _memory(node.pid)
         peer.set_recording(False)
         report['burst']['recorded'] = _recorded(report.pop('burst_bag'))
@@ -135,8 +150,22 @@ def main() -> int:
         node.wait(timeout=60)
     report['machine'] = {'cpus': os.cpu_count(), 'python': platform.python_version(),
                          'platform': platform.platform()}
+    report['table_load_ms'], report['joint_cycle'] = _in_process(cell, cache, joints,
+                                                                 report.pop('joint_cycles'))
     e2e, burst = report['sequential'], report['burst']
-    print(f"station table ready {report['station_table_seconds']:.1f} s after the roadmap")
+    print(f"station table planned {report['station_table_seconds']:.1f} s after the roadmap "
+          f"(cold); loaded from the cache in {report['table_load_ms']['median']:.1f} ms "
+          f"(median of {report['table_load_ms']['n']})")
+    for kind, label in (('station', 'station requests (table)'),
+                        ('joint', 'joint requests (budget)')):
+        part = e2e[kind]
+        print(f"{label}: {part['requests']}, end-to-end median {part['e2e_ms']['median']:.1f} "
+              f"ms, p99 {part['e2e_ms']['p99']:.1f}, max {part['e2e_ms']['max']:.1f}")
+    cycle = report['joint_cycle']
+    print(f"joint requests' cycle time / unbudgeted optimum: median {cycle['median']:.4f}, "
+          f"p90 {cycle['p90']:.4f}, max {cycle['max']:.4f} ({cycle['n']} pairs; unbudgeted "
+          f"planning median {cycle['unbudgeted_ms']['median']:.0f} ms, p99 "
+          f"{cycle['unbudgeted_ms']['p99']:.0f})")
     print(f"sequential: {e2e['requests']} requests, end-to-end median "
           f"{e2e['e2e_ms']['median']:.1f} ms (p99 {e2e['e2e_ms']['p99']:.1f}), planner "
           f"median {e2e['planner_ms']['median']:.1f} ms; overhead median "
@@ -166,7 +195,7 @@ def main() -> int:
     return 0
 
 
-def run(peer: Peer) -> dict:
+def run(peer: Peer, cell, joints) -> dict:
     """Run the sequential and burst parts; return the figures."""
     deadline = time.monotonic() + 120.0
     while True:  # discovery, then the node's readiness
@@ -181,7 +210,6 @@ def run(peer: Peer) -> dict:
         if time.monotonic() > deadline:
             raise TimeoutError('the node did not become ready')
         time.sleep(0.05)
-    cell = Cell.from_yaml(default_cell_path())
     pairs = station_pairs(cell)
     # The station table: loaded from the cache, or planned after the roadmap serves.
     ready, deadline = time.monotonic(), time.monotonic() + 3600.0
@@ -193,10 +221,9 @@ def run(peer: Peer) -> dict:
             raise TimeoutError('the station table was not ready within an hour')
         time.sleep(0.2)
     table_seconds = time.monotonic() - ready
-    joints = random_pairs(cell, 50)
     requests = [('s', k, a, b) for k, (a, b) in enumerate(pairs * 3)] + \
         [('j', k, a, b) for k, (a, b) in enumerate(joints)]
-    _sequential(peer, requests, 'warm-')
+    warm = _sequential(peer, requests, 'warm-')
     # Recording on and off in turns, block by block, so that drift in the machine's speed
     # falls on both alike; every request is asked twice in each mode.
     passes = {True: [], False: []}
@@ -254,6 +281,7 @@ def run(peer: Peer) -> dict:
                                        in zip(status_ms, status_at)), reverse=True)[:5]}
     return {'benchmark': 'wafer_planner_node over DDS on loopback, default cell',
             'station_table_seconds': table_seconds, 'sequential': sequential,
+            'joint_cycles': warm['cycle'],
             'recording': recording, 'burst': burst, 'burst_bag': burst_bag}
 
 
@@ -266,7 +294,7 @@ def _status(peer: Peer) -> dict:
 
 def _sequential(peer: Peer, requests, prefix: str) -> dict:
     """Ask station ('s', k, from, to) and joint ('j', k, start, goal) requests in turn."""
-    e2e, planner, in_node, keys = [], [], [], []
+    e2e, planner, in_node, keys, cycle = [], [], [], [], {}
 
     def ask(request_id: str, send) -> None:
         started = time.perf_counter()
@@ -277,6 +305,7 @@ def _sequential(peer: Peer, requests, prefix: str) -> dict:
             e2e.append((received - started) * 1000.0)
             planner.append(float(values['planning_time_ms']))
             in_node.append(float(values['node_ms']))
+            cycle[keys[-1]] = float(values['cycle_time'])
     for kind, k, a, b in requests:
         request_id = f'{prefix}{kind}{k}'
         if kind == 's':
@@ -288,17 +317,57 @@ def _sequential(peer: Peer, requests, prefix: str) -> dict:
             msg.points = [JointTrajectoryPoint(positions=a.tolist()),
                           JointTrajectoryPoint(positions=b.tolist())]
             ask(request_id, lambda: peer.joints.publish(msg))
-    return {'e2e': e2e, 'planner': planner, 'in_node': in_node, 'keys': keys}
+    return {'e2e': e2e, 'planner': planner, 'in_node': in_node, 'keys': keys, 'cycle': cycle}
 
 
 def _merged(passes) -> dict:
-    """Return the statistics of several passes of ``_sequential`` together."""
-    e2e, planner, in_node = (np.concatenate([p[key] for p in passes])
-                             for key in ('e2e', 'planner', 'in_node'))
-    return {'requests': len(e2e), 'e2e_ms': _stats(e2e), 'planner_ms': _stats(planner),
-            'overhead_ms': _stats(e2e - planner),
-            'in_node_overhead_ms': _stats(in_node - planner),
-            'transport_ms': _stats(e2e - in_node)}
+    """Return the statistics of several passes of ``_sequential``: all, and by kind."""
+    out = {}
+    for kind in ('all', 's', 'j'):
+        chosen = [[kind == 'all' or key.startswith(kind) for key in p['keys']] for p in passes]
+        e2e, planner, in_node = (np.concatenate([np.asarray(p[key])[np.asarray(c, bool)]
+                                                 for p, c in zip(passes, chosen)])
+                                 for key in ('e2e', 'planner', 'in_node'))
+        if not len(e2e):
+            continue
+        stats = {'requests': len(e2e), 'e2e_ms': _stats(e2e), 'planner_ms': _stats(planner),
+                 'overhead_ms': _stats(e2e - planner),
+                 'in_node_overhead_ms': _stats(in_node - planner),
+                 'transport_ms': _stats(e2e - in_node)}
+        if kind == 'all':
+            out.update(stats)
+        else:
+            out['station' if kind == 's' else 'joint'] = stats
+    return out
+
+
+def _in_process(cell, cache: str, joints, cycles: dict) -> tuple:
+    """
+    Return the table's load times and the joint requests' cycle times against the optimum.
+
+    In process, after the node has stopped: ``load_table`` from the node's cache 20 times,
+    and the unbudgeted whole-curve optimisation of every joint pair the node answered.
+    """
+    roadmap = load_or_build(cell, cache_dir=cache).roadmap
+    planner = Planner(cell, roadmap, PlannerSettings(method='whole-curve'))
+    loads = []
+    for _ in range(20):
+        loads.append(load_table(planner, cache).seconds * 1000.0)
+    ratios, planning = [], []
+    for k, (a, b) in enumerate(joints):
+        answered = cycles.get(f'j{k}')
+        if answered is None:
+            continue
+        try:
+            result = planner.plan(a, b)
+        except PlanningError:
+            continue
+        ratios.append(answered / result.cycle_time)
+        planning.append(result.timings_ms['total'])
+    ratios = np.array(ratios)
+    return _stats(np.array(loads)), dict(
+        _stats(ratios), p90=float(np.percentile(ratios, 90)), unbudgeted_ms=_stats(
+            np.array(planning)))
 
 
 def _paired(passes, what: str) -> dict:
