@@ -64,3 +64,25 @@ def test_bad_cell_file_exits_2_naming_the_key(tmp_path):
 def test_bad_node_count_exits_2(capsys):
     code, _, err = _run(capsys, '--nodes', '0', '--no-cache')
     assert code == 2 and '--nodes' in err
+
+
+def test_replay_leaves_out_exactly_the_answers_a_time_budget_shaped():
+    from wafer_planner_ros.cli.replay import _budgeted, Replayer
+    from wafer_planner_ros.recording.queries import Query, Result
+
+    def query(kind, values, budget=None):
+        parameters = {} if budget is None else {'planning.optimise_budget': budget}
+        return Query(number=0, kind=kind, topic='', received_ns=0, data=b'', request=None,
+                     result=Result(0, 'r', '', values, 0), parameters=parameters)
+    # A successful answer says which budget it had.
+    assert _budgeted(query('joint', {'code': 'OK', 'budget': '0.2'}, budget=0.0))
+    assert not _budgeted(query('joint', {'code': 'OK', 'budget': '0'}, budget=0.2))
+    # An error does not: a joint request planned with a budget in force counts as budgeted;
+    # a station request never does (the table or the corridor curve answers it).
+    assert _budgeted(query('joint', {'code': 'NO_PATH'}, budget=0.2))
+    assert not _budgeted(query('joint', {'code': 'NO_PATH'}, budget=0.0))
+    assert not _budgeted(query('station', {'code': 'NO_PATH'}, budget=0.2))
+    assert not _budgeted(query('joint', {'code': 'OK', 'budget': 'nan?'}))
+    # Replaying one gives no answer to compare (and needs no roadmap to say so).
+    assert Replayer(None, quiet=True).answer(
+        query('joint', {'code': 'OK', 'budget': '0.2'})) == ('', None)

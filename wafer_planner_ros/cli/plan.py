@@ -94,10 +94,11 @@ def main(argv=None) -> int:
                         help='seconds between returned samples (default: %(default)s)')
     parser.add_argument('--paper', action='store_true',
                         help="the paper's exact pipeline (no shortcuts, Eq. 3 boxes)")
-    parser.add_argument('--method', choices=sorted(METHODS), default=PlannerSettings.method,
-                        help='how the curve is shaped and timed: the corridor curve with '
-                        'optimised knot times, or the whole curve optimised and proven '
-                        '(default: %(default)s)')
+    parser.add_argument('--method', choices=sorted(METHODS), default=None,
+                        help='how the curve is shaped and timed: the whole curve optimised '
+                        'and proven (default; seconds per station pair, answered from the '
+                        'station table once it is stored), or the corridor curve with '
+                        'optimised knot times (milliseconds; the default with --paper)')
     parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
     parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
     args = parser.parse_args(argv)
@@ -107,7 +108,8 @@ def main(argv=None) -> int:
         raise UsageError('give both FROM and TO')
     try:
         settings = replace((PlannerSettings.paper if args.paper else PlannerSettings)(
-            sample_period=args.sample_period), method=args.method)
+            sample_period=args.sample_period), method=args.method or (
+                'knot-timing' if args.paper else 'whole-curve'))
     except ValueError as exc:
         raise UsageError(f'--sample-period: {exc}') from None
     requests = None if args.all_pairs else [(parse_end(args.start), parse_end(args.goal))]

@@ -1,0 +1,52 @@
+"""The node's station table: planned in the worker at start-up, then answering station pairs."""
+
+import shutil
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from node_harness import values, wait_for
+import numpy as np
+import pytest
+
+from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.table import load_table
+
+
+@pytest.mark.slow
+def test_station_requests_are_answered_from_the_table_the_node_planned(
+        roadmap_cache, tmp_path, default_cell):
+    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
+    isolate_dds(tmp_path)
+    cache = tmp_path / 'cache'
+    # The roadmap cached, the table not yet.
+    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    assert not list(cache.glob('table-*.json'))
+    node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.optimise_budget': 0.2, 'planning.timeout': 30.0})
+    try:
+        pairs = len(station_pairs(default_cell))
+        wait_for(lambda: (lambda s: s['station_table'] == pairs
+                          and s['busy_with'] != 'station_table')(node.status()), 300)
+        # The table the node stored is the one it answers from.
+        roadmap = load_or_build(default_cell, cache_dir=cache).roadmap
+        stored = load_table(Planner(default_cell, roadmap, PlannerSettings(
+            method='whole-curve')), cache)
+        node.send_stations({'id': 't1', 'from': 'loadport1', 'to': 'loadlock2'})
+        result = node.result('t1')
+        assert result.level == DiagnosticStatus.OK, result.message
+        got = values(result)
+        assert got['source'] == 'table' and got['method'] == 'whole-curve'
+        assert got['certified'] == 'True'
+        entry = stored.entries[('loadport1', 'loadlock2')]
+        knots = np.asarray(entry['trajectory']['knots'])
+        assert float(got['cycle_time']) == pytest.approx(knots[-1] - knots[0], rel=1e-12)
+        # A joint request is optimised within its budget, never from the table.
+        start = default_cell.stations['loadport1'].configs[0].q
+        node.send_joints('t2', start, start + np.array([0.3, -0.2, 0.1]))
+        got = values(node.result('t2'))
+        assert got['code'] == 'OK', got
+        assert got['source'] == 'planned' and got['method'] == 'whole-curve'
+        assert float(got['budget']) == pytest.approx(0.2)
+    finally:
+        node.close()
