@@ -47,6 +47,22 @@ def test_the_table_holds_every_station_pair_as_planned(planner, built, default_c
     assert built.answer(planner, 'loadport1', 'loadport2') is None  # not a table pair
 
 
+def test_the_way_back_is_the_way_there_backwards(planner, built, default_cell, roadmap_cache):
+    there = built.answer(planner, 'loadport1', 'loadlock2')
+    back = built.answer(planner, 'loadlock2', 'loadport1')
+    assert back.metrics['reversed'] and 'reversed' not in there.metrics
+    assert back.cycle_time == pytest.approx(there.cycle_time, rel=1e-12)
+    assert back.branches == there.branches[::-1]
+    t = np.linspace(0.0, there.cycle_time, 1001)
+    assert np.allclose(back.trajectory.evaluate(t), there.trajectory.evaluate(t[::-1]),
+                       rtol=0, atol=1e-12)
+    assert np.array_equal(back.start_q, there.goal_q)
+    assert back.verification.proof.certified
+    info = roadmap_json(load_or_build(default_cell, cache_dir=roadmap_cache))
+    check(default_cell, plan_json(back, info, default_cell.robot.joint_names), back.start_q,
+          back.goal_q)
+
+
 def test_a_stored_table_loads_to_the_same_answers(planner, built, tmp_path):
     path = save_table(built, tmp_path)
     assert path == table_path(tmp_path, table_key(planner))

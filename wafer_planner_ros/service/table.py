@@ -3,10 +3,11 @@ The station table: every loadport-loadlock pair planned once, kept on disk, answ
 
 Station pairs are a fab's hot path, and the best trajectories take seconds to find
 (``trajectory.shape``). ``build_table`` plans every pair of ``station_pairs`` with a
-planner; ``save_table``/``load_table`` keep the table in the cache directory, one JSON file
-per key. The key is the SHA-256 of the cell's digest, the roadmap's hash, the planner's
-settings (all but the sample period, which only changes the returned samples) and the
-package version; the file stores the key and the SHA-256 of its content. On load both are
+planner (one direction of each; the other is the same motion backwards);
+``save_table``/``load_table`` keep the table in the cache directory, one JSON file per key.
+The key is the SHA-256 of the cell's digest, the roadmap's hash, the planner's settings
+(all but the sample period, which only changes the returned samples) and the package
+version; the file stores the key and the SHA-256 of its content. On load both are
 checked, every station pair must be there (or recorded as not plannable), and every curve
 must be a well-formed clamped cubic that starts and ends exactly at its two stations on
 the branches it names and is proven collision-free again (``proof.prove``, about a
@@ -30,11 +31,11 @@ import numpy as np
 
 from wafer_planner_ros import __version__
 from wafer_planner_ros.cell.stations import station_pairs
-from wafer_planner_ros.errors import PlanningError
+from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import CurveProof, prove
-from wafer_planner_ros.trajectory.verify import Verification
+from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
 
@@ -90,13 +91,22 @@ def table_path(cache_dir, key: str) -> Path:
 
 def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], None]] = None
                 ) -> StationTable:
-    """Plan every station pair; ``progress(done, total, pair)`` after each."""
+    """
+    Plan every station pair; ``progress(done, total, pair)`` after each.
+
+    A pair whose reverse is already planned gets that trajectory backwards in time
+    (``CubicBSpline.backwards``), verified again: every limit, the clearance and the proof
+    are the same for a motion and its reverse, so planning both directions would take
+    twice as long for the same cycle time.
+    """
     begun = time.perf_counter()
     pairs = station_pairs(planner.cell)
     entries, failures = {}, {}
     for done, (start, goal) in enumerate(pairs, 1):
         try:
-            entries[(start, goal)] = _entry(planner.plan(start, goal))
+            back = entries.get((goal, start))
+            entries[(start, goal)] = _entry(planner.plan(start, goal)) if back is None \
+                else _reversed(planner, (start, goal), back)
         except PlanningError as exc:
             failures[(start, goal)] = f'{exc.code.value}: {exc.message}'
         if progress is not None:
@@ -175,10 +185,34 @@ def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> Stat
 
 def _entry(result: PlanResult) -> dict:
     """Return what the table keeps of a plan (plain data)."""
-    checked, proof = result.verification, result.verification.proof
+    return _stored(result.branches, result.trajectory, result.initial_cycle_time,
+                   result.verification, result.roadmap_path, result.path, result.metrics,
+                   result.warnings, result.timings_ms['total'])
+
+
+def _reversed(planner: Planner, pair, entry: dict) -> dict:
+    """Return the entry of ``pair`` from that of its reverse: its trajectory backwards."""
+    begun = time.perf_counter()
+    trajectory = _curve(entry).backwards()
+    branches = entry['branches'][::-1]
+    checked = verify(trajectory, planner.cell, *_ends(planner, pair, branches))
+    if not checked.ok:  # cannot happen for a verified curve; never trusted all the same
+        raise PlanningError(ErrorCode.VERIFICATION_FAILED,
+                            f'the reversed trajectory {"->".join(pair)} failed verification: '
+                            + '; '.join(checked.problems))
+    return _stored(branches, trajectory, entry['initial_cycle_time'], checked,
+                   np.asarray(entry['roadmap_path'])[::-1], np.asarray(entry['path'])[::-1],
+                   dict(entry['metrics'], reversed=True), entry['warnings'],
+                   (time.perf_counter() - begun) * 1000.0)
+
+
+def _stored(branches, trajectory, initial_cycle_time, checked: Verification, roadmap_path,
+            path, metrics, warnings, planning_ms: float) -> dict:
+    """Return a table entry (plain data)."""
+    proof = checked.proof
     return {
-        'branches': list(result.branches), 'trajectory': result.trajectory.describe(),
-        'initial_cycle_time': result.initial_cycle_time,
+        'branches': list(branches), 'trajectory': trajectory.describe(),
+        'initial_cycle_time': initial_cycle_time,
         'verification': {
             'ratios': dict(checked.ratios), 'min_clearance': checked.min_clearance,
             'peak_jerk': list(checked.peak_jerk), 'peak_wafer_jerk': checked.peak_wafer_jerk,
@@ -186,9 +220,8 @@ def _entry(result: PlanResult) -> dict:
             'collision_samples': checked.collision_samples,
             'proof': {'certified': proof.certified, 'pieces': proof.pieces,
                       'depth': proof.depth, 'evaluations': proof.evaluations}},
-        'roadmap_path': result.roadmap_path.tolist(), 'path': result.path.tolist(),
-        'metrics': dict(result.metrics), 'warnings': list(result.warnings),
-        'planning_ms': result.timings_ms['total'],
+        'roadmap_path': np.asarray(roadmap_path).tolist(), 'path': np.asarray(path).tolist(),
+        'metrics': dict(metrics), 'warnings': list(warnings), 'planning_ms': planning_ms,
     }
 
 
@@ -204,15 +237,21 @@ def _check(planner: Planner, pair, entry: dict) -> None:
     if len(curve.knots) != len(points) + 4 or np.any(np.diff(curve.knots) < 0.0) \
             or not np.all(np.isfinite(curve.knots)) or not np.all(np.isfinite(points)):
         raise ValueError('its curve is not a clamped cubic B-spline')
-    ends = []
-    for name, branch in zip(pair, entry['branches']):
-        station = planner.cell.stations[name]
-        ends.append(next(c.q for c in station.configs
-                         if 'joints' in station.spec or c.elbow == branch))
+    ends = _ends(planner, pair, entry['branches'])
     if not (np.array_equal(points[0], ends[0]) and np.array_equal(points[-1], ends[1])):
         raise ValueError('its curve does not join the two stations')
     if not prove(curve, planner.cell.clearance_model, planner.cell.robot.lipschitz).certified:
         raise ValueError('its curve is not proven collision-free')
+
+
+def _ends(planner: Planner, pair, branches) -> list:
+    """Return the configurations of a pair's stations on the given elbow branches."""
+    ends = []
+    for name, branch in zip(pair, branches):
+        station = planner.cell.stations[name]
+        ends.append(next(c.q for c in station.configs
+                         if 'joints' in station.spec or c.elbow == branch))
+    return ends
 
 
 def _curve(entry: dict) -> CubicBSpline:

@@ -228,6 +228,10 @@ class CubicBSpline(Trajectory):
         inside = (turn > low) & (turn < high)
         return np.where(inside, np.maximum(peaks, speed(np.where(inside, turn, low))), peaks)
 
+    def backwards(self) -> 'CubicBSpline':
+        """Return the motion backwards in time, q(T - t): the same limits hold on it."""
+        return CubicBSpline.from_intervals(self.control_points[::-1], self.intervals[::-1])
+
     def describe(self) -> dict:
         """Return the degree, the knots and the control points."""
         return {'degree': DEGREE, 'knots': self.knots.tolist(),

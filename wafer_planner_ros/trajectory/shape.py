@@ -43,6 +43,10 @@ from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
 logger = logging.getLogger(__name__)
 
+POSITION_MARGIN = 1e-6
+"""rad: free control points stay this far inside the position limits, so that rounding
+in evaluating the curve never puts it beyond a limit (a point on the limit did, by 1e-16)."""
+
 
 @dataclass(frozen=True, eq=False)
 class Shaping:
@@ -80,7 +84,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     around = (np.arange(shape.clearance_samples) + 0.5) / shape.clearance_samples
     clearance = _clearance_samples(problem, np.repeat(np.arange(spans), len(around)),
                                    np.tile(around, spans))
-    lower, upper = cell.robot.limits.position.T
+    lower, upper = _inner_limits(cell.robot)
     iterations, message = 0, ''
     for rounds in range(1, shape.max_rounds + 1):
         if deadline is not None and time.monotonic() >= deadline:
@@ -88,8 +92,10 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             break
         result = _solve(problem, current, wafer, clearance, deadline)
         iterations += result.nit
-        # The bounds hold to the QP's precision: rounding beyond a limit is taken back.
-        points = np.clip(result.points, lower, upper)
+        # The bounds hold to the QP's precision: rounding beyond them is taken back (the
+        # fixed end points stay exactly where they are).
+        points = result.points.copy()
+        points[~problem.fixed] = np.clip(points[~problem.fixed], lower, upper)
         intervals = np.maximum(result.intervals, problem.min_interval)
         if not (np.all(np.isfinite(points)) and np.all(np.isfinite(intervals))):
             message = f'solver failed: {result.message}'
@@ -129,6 +135,12 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     if not improved and not message:
         message = 'no proven curve beat the start'
     return Shaping(best, improved, iterations, rounds, spans, message)
+
+
+def _inner_limits(robot) -> tuple:
+    """Return the position limits the free control points keep (``POSITION_MARGIN``)."""
+    lower, upper = robot.limits.position.T
+    return lower + POSITION_MARGIN, upper - POSITION_MARGIN
 
 
 def _clearance_samples(problem: ShapeProblem, span, fraction,
@@ -214,7 +226,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
                                                scale)
         return values[keep] * weights, jacobian[keep] * weights[:, None]
 
-    lower, upper = problem.robot.limits.position.T
+    lower, upper = _inner_limits(problem.robot)
     points = int(free.sum())
     lb = np.concatenate([np.tile(lower, points), problem.min_interval / scale])
     ub = np.concatenate([np.tile(upper, points), np.full(problem.spans, np.inf)])
