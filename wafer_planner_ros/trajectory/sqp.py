@@ -13,11 +13,6 @@ stopping rule (|f - f_previous| < acc with constraint violation < acc). What dif
   definite B) warm-started from the last active set, instead of SLSQP's LSQ/NNLS; on
   the default cell's 16-span problems (55 variables, 270-330 rows) it takes 0.5 ms
   where SLSQP's subproblem took 2.5-3 ms (one BLAS thread) or 15-25 ms (two);
-- the identity B starts from is scaled after the first step to the curvature seen,
-  y'y / s'y (Shanno and Phua 1978; Nocedal and Wright eq. 6.20): on 60 random joint
-  requests of the default cell the whole-curve optimisation took 36 % less time in all
-  (p99 7.8 s -> 3.7 s), the default cell's station pairs 35 % less, for the same median
-  cycle time (+0.04 %);
 - every step is clipped to the bounds, which daqp meets within its tolerance only;
 - an inconsistent linearisation is relaxed by one variable delta in [0, 1] that scales the
   violated rows (SLSQP's device), penalised by ``RELAX_PENALTY``.
@@ -110,10 +105,7 @@ def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub:
             curvature = 2.0 * (change - alpha * slope)
             alpha = max(-slope * alpha * alpha / curvature if curvature > 0.0 else 0.0,
                         0.1 * alpha)
-        step, y = trial - x, (J - J_new).T @ u    # grad of L = c - J' u
-        if iteration == 1 and step @ y > 0.0:
-            B = (y @ y) / (step @ y) * np.eye(n)  # Shanno-Phua: the identity to scale
-        B = _bfgs(B, step, y)
+        B = _bfgs(B, trial - x, (J - J_new).T @ u)    # grad of L = c - J' u
         f_old = f
         x, g, J, f = trial, g_new, J_new, f_new
         if abs(f - f_old) < acc and np.maximum(-g, 0.0).sum() < acc and not relaxed:
