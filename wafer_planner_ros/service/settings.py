@@ -43,7 +43,7 @@ PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('planning.station_table', True,
               'plan every loadport-loadlock pair with the whole-curve optimisation once the '
               'roadmap is loaded (kept in the cache directory) and answer them from it'),
-    Parameter('planning.optimise_budget', 0.2,
+    Parameter('planning.optimise_budget', 0.12,
               'seconds the whole-curve optimisation may spend on a request the station table '
               'does not hold (the best proven curve by then is returned); 0: the corridor '
               'curve only', 0.0, 600.0),

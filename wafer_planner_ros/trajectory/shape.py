@@ -73,7 +73,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     as a solve's optimum, whose samples are a subset of the final ones, exceeds it by more
     than ``TimingSettings.give_up_margin``. ``deadline``: a ``time.monotonic()`` instant;
     the solver stops there and the fastest proven curve so far is returned (the start at
-    worst).
+    worst); with a deadline each solve stops at ``ShapeSettings.budget_ftol``.
     """
     problem = ShapeProblem(start, cell, shape, timing)
     best = current = problem.start
@@ -233,7 +233,8 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     objective = np.concatenate([np.zeros(3 * int(free.sum())), scale])
     result = sqp.solve(linearised, objective, x0, lb, ub,
                        max_iterations=problem.settings.max_iterations,
-                       acc=problem.settings.ftol,
+                       acc=problem.settings.ftol if deadline is None else
+                       problem.settings.budget_ftol,
                        first=(first[0][keep] * weights, first[1][keep] * weights[:, None]),
                        stop=None if deadline is None else
                        (lambda: time.monotonic() >= deadline))
