@@ -53,6 +53,7 @@ def test_the_way_back_is_the_way_there_backwards(planner, built, default_cell, r
     assert back.metrics['reversed'] and 'reversed' not in there.metrics
     assert back.cycle_time == pytest.approx(there.cycle_time, rel=1e-12)
     assert back.branches == there.branches[::-1]
+    assert back.metrics['branches'] == list(back.branches)
     t = np.linspace(0.0, there.cycle_time, 1001)
     assert np.allclose(back.trajectory.evaluate(t), there.trajectory.evaluate(t[::-1]),
                        rtol=0, atol=1e-12)
@@ -142,3 +143,15 @@ def test_a_table_missing_pairs_or_with_a_colliding_curve_is_refused(planner, bui
     save_table(replace(built, entries=dict(built.entries) | {pairs[0]: entry}), tmp_path)
     with pytest.raises(TableError, match='not proven collision-free'):
         load_table(planner, tmp_path)
+
+
+def test_a_reversed_entry_names_its_own_branches(roadmap_cache):
+    from conftest import CELL_FILES
+    from wafer_planner_ros.cell.model import Cell
+    cell = Cell.from_yaml(CELL_FILES['pillar'])  # a station given by joint angles
+    table = build_table(Planner(cell, load_or_build(cell, cache_dir=roadmap_cache).roadmap))
+    reversed_entries = [e for e in table.entries.values() if e['metrics'].get('reversed')]
+    assert len(reversed_entries) == len(table.entries) // 2
+    assert any(e['branches'] != e['branches'][::-1] for e in reversed_entries)
+    for entry in table.entries.values():
+        assert entry['metrics']['branches'] == entry['branches']

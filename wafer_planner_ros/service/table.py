@@ -202,7 +202,7 @@ def _reversed(planner: Planner, pair, entry: dict) -> dict:
                             + '; '.join(checked.problems))
     return _stored(branches, trajectory, entry['initial_cycle_time'], checked,
                    np.asarray(entry['roadmap_path'])[::-1], np.asarray(entry['path'])[::-1],
-                   dict(entry['metrics'], reversed=True), entry['warnings'],
+                   dict(entry['metrics'], reversed=True, branches=branches), entry['warnings'],
                    (time.perf_counter() - begun) * 1000.0)
 
 
