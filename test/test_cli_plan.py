@@ -2,6 +2,8 @@
 
 import json
 
+import numpy as np
+
 from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.plan import main
@@ -110,3 +112,22 @@ def test_a_closed_ring_is_accepted_with_a_warning(roadmap_cache, tmp_path, capsy
     default = json.loads(_run(capsys, '--cache-dir', str(roadmap_cache), '--json', '-',
                               'loadport2', 'loadlock2')[1])
     assert json.loads(out)['roadmap']['hash'] == default['roadmap']['hash']
+
+
+def test_joint_angles_that_start_with_a_minus_are_ends_not_options(
+        roadmap_cache, capsys, default_cell):
+    q = default_cell.stations['loadport1'].configs[1].q  # elbow -1: every angle negative
+    assert np.all(q < 0)
+    start = ','.join(repr(float(v)) for v in q)
+    code, out, err = _run(capsys, start, 'loadlock1', '--method', 'knot-timing',
+                          '--cache-dir', str(roadmap_cache), '--json', '-')
+    assert code == 0, err
+    plan = json.loads(out)
+    assert plan['status'] == 'ok' and np.allclose(plan['points'][0]['q'], q, atol=1e-12)
+    # Also as the goal, and a mistyped one is named, not taken for an unknown option.
+    code, _, err = _run(capsys, 'loadlock1', start, '--method', 'knot-timing',
+                        '--cache-dir', str(roadmap_cache))
+    assert code == 0, err
+    code, _, err = _run(capsys, '-1,x,2', 'loadlock1', '--cache-dir', str(roadmap_cache))
+    assert code == 2 and '"-1,x,2" is neither a station name' in err
+    assert 'unrecognized arguments' not in err

@@ -61,6 +61,10 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
         assert node.poll() is None  # still running, still ready and answering
         again = _client(dds_env, 'loadport2', 'loadlock1', '--id', 'p3')
         assert again.returncode == 0, again.stdout + again.stderr
+        # Joint angles that start with '-' are an end, not an unknown option.
+        negative = _client(dds_env, '-2.4303,-1.5807,-0.7014', 'loadlock1', '--id', 'p4')
+        assert negative.returncode == 0, negative.stdout + negative.stderr
+        assert 'p4: ok:' in negative.stdout
     finally:
         node.send_signal(signal.SIGINT)
         output, _ = node.communicate(timeout=60)

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.errors import ErrorCode
-from wafer_planner_ros.service.requests import (end_label, joint_request, MAX_ID, quote,
-                                                RequestError, station_request)
+from wafer_planner_ros.service.requests import (end_label, end_of_text, joint_request,
+                                                MAX_ID, quote, RequestError, station_request,
+                                                with_negative_ends)
 
 JOINTS = ('joint_1', 'joint_2', 'joint_3')
 LONGEST_MESSAGE = 700
@@ -168,3 +169,11 @@ def test_any_text_is_a_request_or_one_request_error(text):
     for end in (request.start, request.goal):
         assert isinstance(end, str) or (end.shape == (3,) and np.all(np.isfinite(end)))
         end_label(end).encode('utf-8')  # an answer can carry it
+
+
+def test_negative_joint_angles_stay_positional_and_read_as_angles():
+    argv = ['-2.43,-1.58,-0.70', 'loadlock1', '--json', '-', '--sample-period', '-0.01',
+            '--id=a,b', '-h']
+    marked = with_negative_ends(argv)
+    assert marked == [' -2.43,-1.58,-0.70'] + argv[1:]  # only the joint angles change
+    assert end_of_text(marked[0]) == [-2.43, -1.58, -0.70]

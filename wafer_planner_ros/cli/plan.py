@@ -12,7 +12,7 @@ from wafer_planner_ros.cli.common import write_json
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import error_json, plan_json, roadmap_json
-from wafer_planner_ros.service.requests import end_of_text
+from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
 from wafer_planner_ros.service.table import load_or_build_table, load_table, TableError
 from wafer_planner_ros.trajectory.methods import METHODS
 
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
                         'optimised knot times (milliseconds; the default with --paper)')
     parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
     parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
-    args = parser.parse_args(argv)
+    args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
     if args.all_pairs == (args.start is not None):
         raise UsageError('give FROM and TO, or --all-pairs')
     if not args.all_pairs and args.goal is None:

@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from wafer_planner_ros.node.planner_node import RELIABLE
-from wafer_planner_ros.service.requests import end_of_text
+from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
 
 
 def main(argv=None) -> int:
@@ -36,7 +36,7 @@ def main(argv=None) -> int:
                              'and its answer (default: 30)')
     parser.add_argument('--node', default='/wafer_planner',
                         help='the planner node (default: /wafer_planner)')
-    args = parser.parse_args(argv)
+    args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
     try:
         ends = [end_of_text(args.start), end_of_text(args.goal)]
     except ValueError as exc:

@@ -323,5 +323,17 @@ def end_of_text(text: str) -> Union[str, list]:
     try:
         return [float(v) for v in text.split(',')]
     except ValueError:
-        raise ValueError(f'{quote(text)} is neither a station name nor comma-separated '
-                         'joint angles') from None
+        raise ValueError(f'{quote(text.strip())} is neither a station name nor '
+                         'comma-separated joint angles') from None
+
+
+def with_negative_ends(argv: Sequence[str]) -> list:
+    """
+    Return command-line arguments in which joint angles starting with '-' stay positional.
+
+    argparse reads '-3.1,2.0,1.8' as an unknown option. No option of the tools has a comma,
+    so an argument that starts with one '-' and holds a comma gets a leading space, which
+    argparse does not read as an option and ``end_of_text`` ignores.
+    """
+    return [' ' + a if a.startswith('-') and not a.startswith('--') and ',' in a else a
+            for a in argv]
