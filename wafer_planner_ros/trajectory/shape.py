@@ -37,7 +37,7 @@ from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape_problem import ShapeProblem
-from wafer_planner_ros.trajectory.timing import single_blas_thread
+from wafer_planner_ros.trajectory.timing import peaks_over, single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
@@ -128,7 +128,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             clearance = tuple(np.concatenate([a, b]) for a, b in zip(clearance, more))
         if rescale > 1.0 + timing.rescale_tolerance:
             # Between samples the wafer limit was exceeded: sample the peaks.
-            peaks = _peaks_over(ratio, timing.margin * (1.0 + 2e-4))
+            peaks = peaks_over(ratio, timing.margin * (1.0 + 2e-4))
             wafer = (np.append(wafer[0], dense_span[peaks]),
                      np.append(wafer[1], dense_fraction[peaks]))
     improved = best is not problem.start
@@ -170,13 +170,6 @@ def _at_times(curve: CubicBSpline, times) -> tuple:
     return span, fraction
 
 
-def _peaks_over(ratio: np.ndarray, threshold: float) -> np.ndarray:
-    """Return the indices of the local maxima of ``ratio`` that exceed ``threshold``."""
-    padded = np.concatenate([[-np.inf], ratio, [-np.inf]])
-    peak = (ratio >= padded[:-2]) & (ratio > padded[2:]) & (ratio > threshold)
-    return np.nonzero(peak)[0]
-
-
 @dataclass(frozen=True, eq=False)
 class _Solved:
     """What one SLSQP run returned."""
@@ -194,13 +187,13 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     """
     Run SLSQP's method (``sqp``) from ``start``: durations relative to the start's.
 
-    The free control points are bounded by the position limits (the QP's simple bounds:
-    bounding only those near a limit and the rest when they crossed one took 1.4 x as long
-    over the default cell's station pairs, solving some rounds twice); at ``deadline``
-    (``time.monotonic()``) it stops where it is. Rows are
-    weighted to norm 1 near the start, rows that do not depend on the variables dropped:
-    with Jacobian entries from 1e-11 to 1e3 SLSQP's subproblem took 4.5 x as long per
-    iteration (29 ms against 6.5 ms, 55 variables, 253 rows).
+    The free control points are bounded by the position limits, ``POSITION_MARGIN``
+    inside (the QP's simple bounds: bounding only those near a limit and the rest when
+    they crossed one took 1.4 x as long over the default cell's station pairs, solving
+    some rounds twice); at ``deadline`` (``time.monotonic()``) it stops where it is. Rows
+    are weighted to norm 1 near the start, rows that do not depend on the variables
+    dropped: with Jacobian entries from 1e-11 to 1e3 SLSQP's subproblem took 4.5 x as long
+    per iteration (29 ms against 6.5 ms, 55 variables, 253 rows).
     """
     single_blas_thread()
     scale = start.intervals.copy()
@@ -227,10 +220,10 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
         return values[keep] * weights, jacobian[keep] * weights[:, None]
 
     lower, upper = _inner_limits(problem.robot)
-    points = int(free.sum())
-    lb = np.concatenate([np.tile(lower, points), problem.min_interval / scale])
-    ub = np.concatenate([np.tile(upper, points), np.full(problem.spans, np.inf)])
-    objective = np.concatenate([np.zeros(3 * int(free.sum())), scale])
+    moving = int(free.sum())
+    lb = np.concatenate([np.tile(lower, moving), problem.min_interval / scale])
+    ub = np.concatenate([np.tile(upper, moving), np.full(problem.spans, np.inf)])
+    objective = np.concatenate([np.zeros(3 * moving), scale])
     result = sqp.solve(linearised, objective, x0, lb, ub,
                        max_iterations=problem.settings.max_iterations,
                        acc=problem.settings.ftol if deadline is None else

@@ -93,7 +93,7 @@ def optimise(problem: TimingProblem, start=None, give_up_above=None) -> Optional
             return Timing(best, start, scale, True, iterations, rounds, len(span))
         # Between samples the limit was exceeded: sample the peaks and solve again.
         rows |= problem.control_constraints(intervals) <= tuning.active
-        peaks = _peaks_over(ratio, tuning.margin * (1.0 + 2e-4))
+        peaks = peaks_over(ratio, tuning.margin * (1.0 + 2e-4))
         span = np.append(span, dense_span[peaks])
         fraction = np.append(fraction, dense_fraction[peaks])
     if best is start:
@@ -105,7 +105,7 @@ def optimise(problem: TimingProblem, start=None, give_up_above=None) -> Optional
                   f'stopped after {rounds} rounds, rescaled by {rescale:.4f}')
 
 
-def _peaks_over(ratio: np.ndarray, threshold: float) -> np.ndarray:
+def peaks_over(ratio: np.ndarray, threshold: float) -> np.ndarray:
     """Return the indices of the local maxima of ``ratio`` that exceed ``threshold``."""
     padded = np.concatenate([[-np.inf], ratio, [-np.inf]])
     peak = (ratio >= padded[:-2]) & (ratio > padded[2:]) & (ratio > threshold)
