@@ -19,7 +19,8 @@ setup: $(STAMP)
 
 $(STAMP): requirements.txt setup.py setup.cfg package.xml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	@echo "Installing requirements.txt into .venv/ (about a minute, once):"
+	$(PY) -m pip install --disable-pip-version-check --progress-bar on -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
 	@# setup.cfg puts console scripts where `ros2 run` looks; put them on the venv's PATH too.
 	cd $(VENV)/bin && ln -sf ../lib/wafer_planner_ros/* .
@@ -43,6 +44,7 @@ bench: $(STAMP)
 	$(ENV) $(PY) bench/bench_roadmap.py
 	$(ENV) $(PY) bench/bench_plan.py
 	$(ENV) $(PY) bench/bench_node.py
+	$(ENV) $(PY) bench/bench_startup.py
 	$(ENV) $(PY) bench/bench_cell.py
 	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
 

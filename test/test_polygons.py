@@ -31,6 +31,8 @@ GEOS_ROUNDED = []
 """Polygons GEOS gets wrong: its double-double orientation rounds, exact arithmetic is ours."""
 
 FAMILIES = ('grid', 'rectilinear', 'star', 'chamfer', 'sliver', 'detour')
+COMPILED, INTERPRETED = (lambda k: k), (lambda k: k.interpreted)
+"""How simple_polygon runs its kernels (``kernels.sized``)."""
 
 
 def _settings(examples):
@@ -164,14 +166,26 @@ _REASON = re.compile(rf'self-intersecting: edges (\d+) and (\d+) '
                      rf'(?: to {_POINT})?')
 
 
+def checked(points, form=COMPILED):
+    """Return (the polygon or None, the reason or None) as simple_polygon gives them."""
+    try:
+        return simple_polygon(points, form), None
+    except PolygonError as error:
+        return None, error.reason
+
+
 def compare(family: str, points) -> None:
-    """Assert that simple_polygon agrees with GEOS on the points, and check what it says."""
+    """
+    Assert that simple_polygon agrees with GEOS on the points, and check what it says.
+
+    Its kernels run interpreted (as the node reads its cell file) give the same answer.
+    """
     points = np.asarray(points, dtype=float)
     geos = geos_valid(points)
-    try:
-        polygon, reason = simple_polygon(points), None
-    except PolygonError as error:
-        polygon, reason = None, error.reason
+    polygon, reason = checked(points)
+    again, again_reason = checked(points, INTERPRETED)
+    assert again_reason == reason, points.tolist()
+    assert polygon is None or np.array_equal(again.points, polygon.points), points.tolist()
     COMPARED[family] = COMPARED.get(family, 0) + 1
     if (polygon is not None) != geos and exact_valid(points) == (polygon is not None) \
             and rounds_in_geos(points):
@@ -543,26 +557,29 @@ def test_orientation_is_exact():
     assert orientation((0, 0), (1e200, 1e200), (3e200, 3.0000000000000004e200)) == 1
 
 
-def test_touches_or_overlaps():
+@pytest.mark.parametrize('form', [COMPILED, INTERPRETED], ids=['compiled', 'interpreted'])
+def test_touches_or_overlaps(form):
     square = [(0, 0), (1, 0), (1, 1), (0, 1)]
-    assert touches_or_overlaps(square, [(1, 1), (2, 1), (2, 2)])  # a corner
-    assert touches_or_overlaps(square, [(1, 0.2), (2, 0.2), (2, 0.8), (1, 0.8)])  # a wall
-    assert touches_or_overlaps(square, [(0.2, 0.2), (0.4, 0.2), (0.4, 0.4)])  # inside
-    assert touches_or_overlaps([(0.2, 0.2), (0.4, 0.2), (0.4, 0.4)], square)
-    assert touches_or_overlaps(square, [(0.5, 0.5), (3, 0.5), (3, 3)])  # crossing
+    assert touches_or_overlaps(square, [(1, 1), (2, 1), (2, 2)], form)  # a corner
+    assert touches_or_overlaps(square, [(1, 0.2), (2, 0.2), (2, 0.8), (1, 0.8)], form)  # wall
+    assert touches_or_overlaps(square, [(0.2, 0.2), (0.4, 0.2), (0.4, 0.4)], form)  # inside
+    assert touches_or_overlaps([(0.2, 0.2), (0.4, 0.2), (0.4, 0.4)], square, form)
+    assert touches_or_overlaps(square, [(0.5, 0.5), (3, 0.5), (3, 3)], form)  # crossing
     # Collinear with a wall but apart from it: the old segment test said they touch.
-    assert not touches_or_overlaps(square, [(2, 0), (3, 0), (3, 1)])
-    assert not touches_or_overlaps(square, [(1.5, 1.5), (2, 1.5), (2, 2)])
+    assert not touches_or_overlaps(square, [(2, 0), (3, 0), (3, 1)], form)
+    assert not touches_or_overlaps(square, [(1.5, 1.5), (2, 1.5), (2, 2)], form)
 
 
-def test_a_coordinate_too_small_for_the_fast_arithmetic_is_still_judged_exactly():
-    # 1e-300 is below 2**-300: the turns that involve it are decided with fractions.
+@pytest.mark.parametrize('form', [COMPILED, INTERPRETED], ids=['compiled', 'interpreted'])
+def test_a_coordinate_too_small_for_the_fast_arithmetic_is_still_judged_exactly(form):
+    # 1e-300 is below 2**-300: the turns that involve it are decided with fractions (in
+    # compiled code through numba's object mode).
     square = np.array([[0.0, 0.0], [1.0, 1e-300], [1.0, 1.0], [0.0, 1.0]])
-    assert simple_polygon(square).points.shape == (4, 2)
+    assert simple_polygon(square, form).points.shape == (4, 2)
     assert geos_valid(square)
     bowtie = np.array([[0.0, 0.0], [1.0, 1e-300], [0.0, 1.0], [1.0, 1.0]])
     with pytest.raises(PolygonError, match='self-intersecting: edges 1 and 3'):
-        simple_polygon(bowtie)
+        simple_polygon(bowtie, form)
     assert not geos_valid(bowtie)
     # A vertex exactly on an edge, found although the edge's end is 1e-300 off the axis.
     touching = np.array([[0.0, 0.0], [2.0, 2e-300], [2.0, 1.0], [1.0, 1e-300], [0.0, 1.0]])

@@ -16,11 +16,15 @@ the joint angles, for the constraints of a trajectory optimiser.
 
 from dataclasses import dataclass
 
-from numba import njit
 import numpy as np
 
+from wafer_planner_ros import kernels
 from wafer_planner_ros.geometry.kinematics import PlanarArm
 from wafer_planner_ros.geometry.planar import point_segment_distance
+from wafer_planner_ros.kernels import kernel
+
+INTERPRETED_WORK = 2000
+"""Configurations x edges up to which a clearance runs interpreted until numba is loaded."""
 
 
 @dataclass(frozen=True)
@@ -143,9 +147,12 @@ class ClearanceModel:
 
     def _distances(self, q: np.ndarray, per_edge: bool) -> np.ndarray:
         q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=float)))
-        out = _spine_distances(q, np.asarray(self.arm.base, float),
-                               np.asarray(self.arm.link_lengths, float), self.edge_start,
-                               self.edge_end, self._edge_len_sq, self._base_dist, per_edge)
+        # A few configurations (a cell file's stations) are checked without loading numba.
+        form = kernels.sized(len(q) * len(self.edge_start), INTERPRETED_WORK)
+        out = form(_spine_distances)(q, np.asarray(self.arm.base, float),
+                                     np.asarray(self.arm.link_lengths, float),
+                                     self.edge_start, self.edge_end, self._edge_len_sq,
+                                     self._base_dist, per_edge)
         return out if per_edge else out[:, :, 0]
 
     def clearance(self, q: np.ndarray) -> np.ndarray:
@@ -167,7 +174,7 @@ class ClearanceModel:
                        margin=self.margin)
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _spine_distances(q, base, link_lengths, edge_start, edge_end, edge_len_sq, base_dist,
                      per_edge):
     """
@@ -197,7 +204,7 @@ def _spine_distances(q, base, link_lengths, edge_start, edge_end, edge_len_sq, b
     return out
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _spine_distance_gradients(q, base, link_lengths, edge_start, edge_end, edge_len_sq,
                               base_dist):
     """
@@ -250,7 +257,7 @@ def _spine_distance_gradients(q, base, link_lengths, edge_start, edge_end, edge_
     return dist, grad
 
 
-@njit(cache=True, nogil=True, inline='always')
+@kernel(nogil=True, inline='always')
 def _joint_points(q, base, link_lengths, x, y):
     """Write base, elbow, wrist and wafer centre of one configuration (3,) into x, y (4,)."""
     x[0], y[0] = base[0], base[1]
@@ -262,7 +269,7 @@ def _joint_points(q, base, link_lengths, x, y):
         x[j + 1], y[j + 1] = base[0] + cx_, base[1] + cy_
 
 
-@njit(cache=True, nogil=True, inline='always')
+@kernel(nogil=True, inline='always')
 def _link_to_edge(ax, ay, bx, by, cx, cy, dx, dy, edge_len_sq, start, start_ux, start_uy):
     """
     Return the distance of link a-b to edge c-d, with the witness pair of its nearest points.

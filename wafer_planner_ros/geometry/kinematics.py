@@ -8,8 +8,9 @@ the leading axes.
 
 from dataclasses import dataclass
 
-from numba import njit
 import numpy as np
+
+from wafer_planner_ros.kernels import kernel
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,7 @@ def wrap_into_limits(q: np.ndarray, position_limits: np.ndarray):
     return np.clip(shifted, lower, upper) if bool(np.all(inside)) else None
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def wafer_acceleration_point(link_lengths, q, qd, qdd):
     """
     Return the wafer-centre acceleration (ax, ay) of one state (float or complex).
@@ -147,7 +148,7 @@ def wafer_acceleration_point(link_lengths, q, qd, qdd):
     return ax, ay
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _wafer_acceleration_many(link_lengths, q, qd, qdd):
     ax, ay = np.empty(len(q)), np.empty(len(q))
     for k in range(len(q)):

@@ -11,18 +11,23 @@ spike (an edge doubling back over its neighbour). Edge ``k`` runs from point ``k
 in the file.
 
 The orientation test is exact in sign, like GEOS's (``predicates``). Candidate edge pairs
-come from a sort-and-sweep over the edges' x-extents, compiled with numba.
+come from a sort-and-sweep over the edges' x-extents, compiled with numba. Polygons of up
+to ``INTERPRETED_VERTICES`` vertices are checked by the same kernels run as Python while
+numba is not loaded yet (``kernels``): so the node reads its cell file without numba.
 """
 
 from dataclasses import dataclass
 from fractions import Fraction
 
-from numba import njit
 import numpy as np
 
+from wafer_planner_ros import kernels
 from wafer_planner_ros.geometry.predicates import is_safe, orient, orientation
+from wafer_planner_ros.kernels import kernel
 
 _NONE, _CROSS, _TOUCH, _OVERLAP = 0, 1, 2, 3
+INTERPRETED_VERTICES = 64
+"""Up to this many vertices in all, a check runs interpreted until numba is loaded."""
 
 
 class PolygonError(ValueError):
@@ -44,12 +49,13 @@ class SimplePolygon:
     """What was dropped from the points as written, one sentence each."""
 
 
-def simple_polygon(points) -> SimplePolygon:
+def simple_polygon(points, form=None) -> SimplePolygon:
     """
     Return the points as a validated, counter-clockwise :class:`SimplePolygon`.
 
     Raise :class:`PolygonError` naming the two edges and where they meet when the polygon is
-    not a valid GEOS shell.
+    not a valid GEOS shell. ``form``: how the kernels run (``kernels.sized``), by default
+    interpreted up to ``INTERPRETED_VERTICES`` vertices until numba is loaded.
     """
     xy = np.array(points, dtype=float)
     if xy.ndim != 2 or xy.shape[1] != 2:
@@ -66,32 +72,35 @@ def simple_polygon(points) -> SimplePolygon:
     if len(np.unique(vertices + 0.0, axis=0)) < 3:  # + 0.0: -0.0 is the same point as 0.0
         raise PolygonError('has fewer than 3 distinct points')
     safe = is_safe(vertices)
-    if _all_collinear(vertices, safe):
+    form = form or kernels.sized(len(vertices), INTERPRETED_VERTICES)
+    if form(_all_collinear)(vertices, safe):
         raise PolygonError('has zero area (all its points lie on one line)')
-    i, j, kind = _first_intersection(vertices, safe)
+    i, j, kind = form(_first_intersection)(vertices, safe)
     if kind != _NONE:
         # Edge k of the vertices starts at the last written copy of vertex k.
         labels = np.append(kept[1:] - 1, end - 1)
         raise PolygonError(_describe(vertices, i, j, kind, labels, safe))
-    if not _counter_clockwise(vertices, safe):
+    if not form(_counter_clockwise)(vertices, safe):
         vertices = vertices[::-1].copy()
     return SimplePolygon(points=vertices, notes=tuple(notes))
 
 
-def touches_or_overlaps(a, b) -> bool:
+def touches_or_overlaps(a, b, form=None) -> bool:
     """
     Return whether the closed regions of polygons ``a`` and ``b`` share at least one point.
 
     True when an edge of one touches, crosses or overlaps an edge of the other, or one lies
-    inside the other; exact, like :func:`simple_polygon`.
+    inside the other; exact, like :func:`simple_polygon` (``form`` as there).
     """
     a = np.ascontiguousarray(a, dtype=float)
     b = np.ascontiguousarray(b, dtype=float)
     safe = is_safe(a) and is_safe(b)
-    if _edges_meet(a, b, safe):
+    form = form or kernels.sized(len(a) + len(b), INTERPRETED_VERTICES)
+    if form(_edges_meet)(a, b, safe):
         return True
     # No edges meet, so each vertex is strictly inside or strictly outside the other polygon.
-    return bool(_inside(a[0, 0], a[0, 1], b, safe) or _inside(b[0, 0], b[0, 1], a, safe))
+    inside = form(_inside)
+    return bool(inside(a[0, 0], a[0, 1], b, safe) or inside(b[0, 0], b[0, 1], a, safe))
 
 
 def _drop_closing(xy: np.ndarray) -> tuple:
@@ -163,14 +172,14 @@ def _number(x: float) -> str:
     return f'{x:.3g}'  # below a centimetre 3 decimals say too little
 
 
-@njit(cache=True)
+@kernel
 def _same_direction(ux, uy, vx, vy):
     """Return whether collinear vectors u and v (both non-zero) point the same way."""
     return (ux > 0.0) == (vx > 0.0) and (ux < 0.0) == (vx < 0.0) and \
         (uy > 0.0) == (vy > 0.0) and (uy < 0.0) == (vy < 0.0)
 
 
-@njit(cache=True)
+@kernel
 def _segments(px, py, qx, qy, rx, ry, sx, sy, safe):
     """Return how segments p-q and r-s with overlapping bounding boxes intersect."""
     o1 = orient(px, py, qx, qy, rx, ry, safe)
@@ -196,7 +205,7 @@ def _segments(px, py, qx, qy, rx, ry, sx, sy, safe):
     return _CROSS
 
 
-@njit(cache=True)
+@kernel
 def _pair(xy, i, j, safe):
     """Return how edges i and j of the ring xy intersect beyond a shared vertex."""
     n = xy.shape[0]
@@ -217,14 +226,14 @@ def _pair(xy, i, j, safe):
     return _segments(p[0], p[1], q[0], q[1], r[0], r[1], s[0], s[1], safe)
 
 
-@njit(cache=True)
+@kernel
 def _boxes(starts, ends):
     lo = np.minimum(starts, ends)
     hi = np.maximum(starts, ends)
     return lo[:, 0].copy(), hi[:, 0].copy(), lo[:, 1].copy(), hi[:, 1].copy()
 
 
-@njit(cache=True)
+@kernel
 def _first_intersection(xy, safe):
     """
     Return (i, j, kind) of the intersecting edge pair with the smallest (i, j), i < j.
@@ -258,7 +267,7 @@ def _first_intersection(xy, safe):
     return best_i, best_j, best_kind
 
 
-@njit(cache=True)
+@kernel
 def _all_collinear(xy, safe):
     """Return whether every vertex lies on the line through the first two distinct ones."""
     n = xy.shape[0]
@@ -275,7 +284,7 @@ def _all_collinear(xy, safe):
     return True
 
 
-@njit(cache=True)
+@kernel
 def _counter_clockwise(xy, safe):
     """Return whether a simple ring runs counter-clockwise (the turn at its lowest vertex)."""
     n = xy.shape[0]
@@ -289,7 +298,7 @@ def _counter_clockwise(xy, safe):
     return orient(p[0], p[1], q[0], q[1], r[0], r[1], safe) > 0
 
 
-@njit(cache=True)
+@kernel
 def _edges_meet(a, b, safe):
     """Return whether an edge of ring a touches, crosses or overlaps an edge of ring b."""
     na, nb = a.shape[0], b.shape[0]
@@ -316,7 +325,7 @@ def _edges_meet(a, b, safe):
     return False
 
 
-@njit(cache=True)
+@kernel
 def _inside(px, py, ring, safe):
     """Return whether p, on no edge of the ring, is inside it (crossings to its right)."""
     n = ring.shape[0]

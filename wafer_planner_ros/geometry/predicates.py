@@ -10,9 +10,9 @@ Python-facing form.
 
 from fractions import Fraction
 
-import numba
-from numba import njit
 import numpy as np
+
+from wafer_planner_ros.kernels import kernel, objmode
 
 # Shewchuk's bound on the rounding error of the 2x2 orientation determinant (orient2d, A).
 _EPS = 2.0 ** -53
@@ -29,7 +29,7 @@ def _orient_fraction(ax, ay, bx, by, cx, cy) -> int:
     return (det > 0) - (det < 0)
 
 
-@njit(cache=True)
+@kernel
 def _two_sum(a, b):
     s = a + b
     bv = s - a
@@ -37,14 +37,14 @@ def _two_sum(a, b):
     return s, (a - av) + (b - bv)
 
 
-@njit(cache=True)
+@kernel
 def _split(a):
     c = _SPLITTER * a
     hi = c - (c - a)
     return hi, a - hi
 
 
-@njit(cache=True)
+@kernel
 def _two_product(a, b):
     p = a * b
     ahi, alo = _split(a)
@@ -52,7 +52,7 @@ def _two_product(a, b):
     return p, alo * blo - (((p - ahi * bhi) - alo * bhi) - ahi * blo)
 
 
-@njit(cache=True)
+@kernel
 def _orient_expansion(ax, ay, bx, by, cx, cy):
     """Return the exact sign of the determinant as a sum of 16 error-free products."""
     acx, acx_t = _two_sum(ax, -cx)
@@ -93,7 +93,7 @@ def _orient_expansion(ax, ay, bx, by, cx, cy):
     return 0
 
 
-@njit(cache=True)
+@kernel
 def _in_range(ax, ay, bx, by, cx, cy):
     """Return whether every non-zero coordinate of the three points is in the safe range."""
     for v in (ax, ay, bx, by, cx, cy):
@@ -103,7 +103,7 @@ def _in_range(ax, ay, bx, by, cx, cy):
     return True
 
 
-@njit(cache=True)
+@kernel
 def orient(ax, ay, bx, by, cx, cy, safe):
     """
     Return the exact sign of the turn a -> b -> c (1 left, -1 right, 0 collinear).
@@ -112,7 +112,7 @@ def orient(ax, ay, bx, by, cx, cy, safe):
     when it is not, only a turn whose own points are outside it takes the slow exact path.
     """
     if not safe and not _in_range(ax, ay, bx, by, cx, cy):
-        with numba.objmode(sign='int64'):
+        with objmode(sign='int64'):
             sign = _orient_fraction(ax, ay, bx, by, cx, cy)
         return sign
     left = (ax - cx) * (by - cy)

@@ -58,8 +58,12 @@ LATCHED_OFFERED = qos(depth=1, transient_local=True)
 class WaferPlannerNode(Node):
     """Plans wafer transfers on request; see the module's description."""
 
-    def __init__(self, **kwargs):
-        """Declare and check the parameters, set up the interfaces, start the worker."""
+    def __init__(self, own_process: bool = False, **kwargs):
+        """
+        Declare and check the parameters, set up the interfaces, start the worker.
+
+        ``own_process``: the node has the process to itself (``main``), see ``PlanningWorker``.
+        """
         super().__init__('wafer_planner', **kwargs)
         self.log = SafeLogger(self.get_logger())
         """The logger of the failure paths: it never raises."""
@@ -103,7 +107,7 @@ class WaferPlannerNode(Node):
         self.create_timer(1.0, self._publish_health)
         self._worker = PlanningWorker(lambda: self.settings, self._recording,
                                       lambda *items: self._send(*items), self.get_logger(),
-                                      lambda: self.get_clock().now().to_msg())
+                                      lambda: self.get_clock().now().to_msg(), own_process)
 
     # ----------------------------------------------------------------- requests in
 
@@ -377,7 +381,7 @@ def main(args=None) -> int:
     rclpy.init(args=args)
     node, executor, code = None, None, 0
     try:
-        node = WaferPlannerNode()
+        node = WaferPlannerNode(own_process=True)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()

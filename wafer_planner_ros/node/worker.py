@@ -30,13 +30,18 @@ from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import held_pairs, plan_request, progress_reporter
-from wafer_planner_ros.node.serving import Serving, station_table, warm_up
+from wafer_planner_ros.node.serving import build_station_table, held_pairs, kernels_announced
+from wafer_planner_ros.node.serving import load_station_table, numba_cache, plan_request
+from wafer_planner_ros.node.serving import progress_reporter, Serving, since_process_start
+from wafer_planner_ros.node.serving import warm_up
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.settings import NodeSettings
 
+TABLE_WAIT = 0.5
+"""A station request waits for the station table being loaded up to this fraction of
+``planning.timeout`` after its receipt (then it gets the corridor curve)."""
 PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
@@ -46,14 +51,16 @@ class PlanningWorker:
     """The loading and planning threads, the backlog and their state; see the module."""
 
     def __init__(self, settings: Callable[[], NodeSettings], recording: NodeRecording,
-                 send: Callable, logger, stamp: Callable):
+                 send: Callable, logger, stamp: Callable, own_process: bool = False):
         """
         Start the threads; the loading one first loads the roadmap.
 
         ``settings`` returns the node's current settings; ``send(*items)`` hands
         (kind, message, query number) items to the executor and never raises; ``stamp``
-        returns a ROS time.
+        returns a ROS time; ``own_process``: the node has the process to itself, so numba
+        keeps its kernels in the cache directory (``serving.numba_cache``).
         """
+        self._own_process = own_process
         self._settings, self._recording, self._send = settings, recording, send
         self._logger, self._stamp = SafeLogger(logger), stamp
         self.lock = threading.Condition()
@@ -69,8 +76,10 @@ class PlanningWorker:
         self._serving: Optional[Serving] = None
         self._previous: Optional[Serving] = None
         """The roadmap before the serving one, for requests received before it took over."""
-        self._table, self._tabling = (None, None), False
-        """(loaded_ns of the roadmap it belongs to, the station table); being planned."""
+        self._table = (None, None)
+        """(loaded_ns of the roadmap it belongs to, the station table)."""
+        self._table_phase: Optional[str] = None
+        """'loading' the station table from the cache (station requests wait), 'planning' it."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
@@ -189,7 +198,7 @@ class PlanningWorker:
             cell = serving.planner.cell if serving is not None else self._loading_cell
             return {
                 'ready': serving is not None,
-                'busy_with': 'station_table' if self._tabling else 'load' if self._loading
+                'busy_with': 'station_table' if self._table_phase else 'load' if self._loading
                 else 'plan' if self._planning else None,
                 'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
@@ -248,6 +257,15 @@ class PlanningWorker:
             self._previous = None  # no request needs it any more: free its memory
         return serving
 
+    def _await_table(self, serving: Serving, until: float) -> None:
+        """Wait, with the lock held, while the station table of ``serving`` is loading."""
+        while self._table_phase == 'loading' and self._serving is serving \
+                and self._table[0] != serving.loaded_ns and not self._stopping:
+            left = until - time.monotonic()
+            if left <= 0.0:
+                return
+            self.lock.wait(left)
+
     def _plan(self, number: int, request, received: float, received_ns: int) -> None:
         """Answer one request, exactly once."""
         roadmap, begun, doing = None, None, 'planning'
@@ -277,6 +295,8 @@ class PlanningWorker:
                                   PlannerSettings(sample_period=settings.sample_period))
             begun = time.monotonic()
             with self.lock:
+                if isinstance(request.start, str) and isinstance(request.goal, str):
+                    self._await_table(serving, received + TABLE_WAIT * settings.timeout)
                 loaded_ns, table = self._table
             table = table if loaded_ns == serving.loaded_ns else None
             try:
@@ -323,6 +343,8 @@ class PlanningWorker:
     def _load_roadmap(self) -> None:
         settings = self._settings()
         started = time.monotonic()
+        if self._own_process:
+            numba_cache(settings.cache_dir)
         try:
             cell_text = read_cell_file(settings.cell_file)  # the very text that is recorded
             cell = Cell.from_text(cell_text, str(settings.cell_file))
@@ -341,7 +363,6 @@ class PlanningWorker:
                                    settings.cache_dir, progress_reporter(self._logger))
             planner = Planner(cell, cached.roadmap,
                               PlannerSettings(sample_period=settings.sample_period))
-            warm_up(planner)
         except Exception as exc:  # noqa: B902 - the node stays up and says why
             self._load_failed(exc)
             return
@@ -370,7 +391,13 @@ class PlanningWorker:
                 self._serving = Serving(planner, cached, loaded_ns)
                 self._loading_cell = None
                 self.load_failed, self.last_load_error = False, ''
+                self._table_phase = 'loading' if settings.station_table else None
                 self.lock.notify_all()
+        self._logger.info(
+            f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
+            f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
+            f'(ready {time.monotonic() - started:.2f} s after loading began'
+            f'{since_process_start()})')
         try:
             roadmap_markers = serialize_message(markers.roadmap_markers(
                 cell, roadmap, settings.frame_id, self._stamp()))
@@ -378,18 +405,32 @@ class PlanningWorker:
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
-        self._logger.info(
-            f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
-            f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
-            f'(ready {time.monotonic() - started:.2f} s after loading began)')
-        with self.lock:
-            self._tabling, table = True, None
+        # The compiled kernels load (the first start after an install compiles them) while
+        # the roadmap serves: the cached station table first, which station requests wait
+        # for, then a plan of each method; then the table is planned if it was not cached.
+        table = None
+        with kernels_announced(self._logger):
+            try:
+                table = load_station_table(planner, settings, self._logger)
+            except Exception as exc:  # noqa: B902 - the roadmap serves without its table
+                self._logger.error(f'station table not loaded: {reason_of(exc)}')
+            with self.lock:
+                self._table = (loaded_ns, table)
+                self._table_phase = 'planning' if table is None and settings.station_table \
+                    else None
+                self.lock.notify_all()
+            try:
+                warm_up(planner)
+            except Exception as exc:  # noqa: B902 - the kernels then load with a request
+                self._logger.error(f'warm-up failed: {reason_of(exc)}')
+        if table is not None or not settings.station_table:
+            return
         try:
-            table = station_table(planner, settings, self._logger)
+            table = build_station_table(planner, settings, self._logger)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         with self.lock:
-            self._table, self._tabling = (loaded_ns, table), False
+            self._table, self._table_phase = (loaded_ns, table), None
 
     def _load_failed(self, exc: Exception, cell_file=None) -> None:
         """Say why the load failed; the serving roadmap, if any, serves on."""

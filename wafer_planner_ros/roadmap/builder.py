@@ -13,7 +13,6 @@ import logging
 import time
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.geometry.certify import certify_segments
@@ -122,6 +121,7 @@ class _Builder:
         # Candidates: k nearest existing nodes, plus the earlier nodes of this batch.
         k = min(neighbors, first)
         if k:
+            from scipy.spatial import cKDTree  # imported when used: see graph.tree
             dist_old, index_old = cKDTree(self.nodes[:first]).query(q, k=k)
             dist_old, index_old = dist_old.reshape(m, k), index_old.reshape(m, k)
         else:

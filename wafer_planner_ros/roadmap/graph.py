@@ -7,9 +7,6 @@ import json
 from typing import Mapping, Tuple
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 
 SAMPLER_NAMES = ('uniform', 'gaussian', 'bridge')
@@ -104,8 +101,9 @@ class Roadmap:
         return len(self.edges)
 
     @functools.cached_property
-    def graph(self) -> csr_matrix:
+    def graph(self) -> 'csr_matrix':  # noqa: F821 - scipy: imported when used (0.17 s)
         """Return the symmetric adjacency matrix weighted by edge length."""
+        from scipy.sparse import csr_matrix
         i, j = self.edges[:, 0], self.edges[:, 1]
         n = self.node_count
         return csr_matrix((np.concatenate([self.lengths, self.lengths]),
@@ -114,11 +112,13 @@ class Roadmap:
     @functools.cached_property
     def components(self) -> np.ndarray:
         """Return the connected-component label of every node."""
+        from scipy.sparse.csgraph import connected_components
         return connected_components(self.graph, directed=False)[1]
 
     @functools.cached_property
-    def tree(self) -> cKDTree:
+    def tree(self) -> 'cKDTree':  # noqa: F821
         """Return a KD-tree over the nodes."""
+        from scipy.spatial import cKDTree
         return cKDTree(self.nodes)
 
     @functools.cached_property

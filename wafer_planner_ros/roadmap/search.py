@@ -5,15 +5,14 @@ from dataclasses import dataclass
 import time
 from typing import Mapping, Optional, Sequence, Tuple
 
-from numba import njit
 import numpy as np
-from scipy.sparse import csr_matrix
 
 from wafer_planner_ros.geometry.certify import certify_segments
+from wafer_planner_ros.kernels import kernel
 
 
-def astar(graph: csr_matrix, coords: np.ndarray, start: int, goal: int,
-          extra: Optional[Mapping[int, Sequence[Tuple[int, float]]]] = None):
+def astar(graph: 'scipy.sparse.csr_matrix', coords: np.ndarray, start: int,  # noqa: F821
+          goal: int, extra: Optional[Mapping[int, Sequence[Tuple[int, float]]]] = None):
     """
     Return ``(path, length)``: the shortest node sequence from start to goal, or None.
 
@@ -45,7 +44,7 @@ def _unwind(parent: np.ndarray, goal: int) -> list:
     return path[::-1]
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _astar(indptr, indices, weights, n_graph, extra_ptr, extra_to, extra_w, coords, start,
            goal):
     """Return (found, parent (N,), cost of the goal): A* with a binary heap of (f, node)."""
@@ -78,7 +77,7 @@ def _astar(indptr, indices, weights, n_graph, extra_ptr, extra_to, extra_w, coor
     return False, parent, np.inf
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _relax(node, lo, hi, to, weights, cost, parent, heuristic, keys, nodes, size):
     """Relax the edges node -> to[lo:hi]; push what improved; return the heap size."""
     for e in range(lo, hi):
@@ -91,12 +90,12 @@ def _relax(node, lo, hi, to, weights, cost, parent, heuristic, keys, nodes, size
     return size
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _before(keys, nodes, a, b):
     return keys[a] < keys[b] or (keys[a] == keys[b] and nodes[a] < nodes[b])
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _sift_up(keys, nodes, i):
     while i > 0:
         up = (i - 1) // 2
@@ -107,7 +106,7 @@ def _sift_up(keys, nodes, i):
         i = up
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _sift_down(keys, nodes, size):
     i = 0
     while True:

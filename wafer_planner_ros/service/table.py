@@ -174,12 +174,18 @@ def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> Stat
             return load_table(planner, cache_dir)
         except TableError as exc:
             logger.info('station table: %s; building it', exc)
+    return build_and_store_table(planner, cache_dir, progress)
+
+
+def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
+                          warn: Callable[[str], None] = logger.warning) -> StationTable:
+    """Build the table and, with a cache directory, store it (``warn`` if that fails)."""
     table = build_table(planner, progress)
     if cache_dir is not None:
         try:
             save_table(table, cache_dir)
         except OSError as exc:
-            logger.warning('station table not stored: %s', exc)
+            warn(f'station table not stored: {exc}')
     return table
 
 

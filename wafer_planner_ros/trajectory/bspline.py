@@ -18,9 +18,9 @@ from dataclasses import dataclass
 from functools import cached_property
 from math import factorial
 
-from numba import njit
 import numpy as np
 
+from wafer_planner_ros.kernels import kernel
 from wafer_planner_ros.trajectory.curve import Trajectory
 
 DEGREE = 3
@@ -28,7 +28,7 @@ WINDOW = 2 * DEGREE + 1
 """Durations a span's points depend on: h_{s-3}..h_{s+3}."""
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def knots_from_intervals(intervals):
     """Return the clamped cubic knot vector of span durations h (s): m + 7 knots."""
     knots = np.zeros(len(intervals) + 2 * DEGREE + 1, dtype=intervals.dtype)
@@ -38,7 +38,7 @@ def knots_from_intervals(intervals):
     return knots
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def derivative_points(points, knots, degree):
     """Return the control points (n - 1, d) of the derivative spline (Eq. 6-7)."""
     n = points.shape[0]
@@ -52,7 +52,7 @@ def padded_windows(intervals: np.ndarray, span: np.ndarray) -> tuple:
     return padded, np.asarray(span)[:, None] + np.arange(WINDOW)
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def raise_degree(funcs, left, right, knots, t, j):
     """
     Turn the degree j - 1 basis functions at t (``funcs[:j]``) into those of degree j.
@@ -70,7 +70,7 @@ def raise_degree(funcs, left, right, knots, t, j):
     funcs[j] = saved
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def window_states(h, points, fraction):
     """
     Return q, q', q'', q''' (4, 3) at ``fraction`` (0..1) of a span.
@@ -107,7 +107,7 @@ def window_states(h, points, fraction):
     return out
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _states_many(padded, windows, points, span, fraction):
     """Return window_states for many (span, fraction) samples, (K, 4, 3)."""
     out = np.empty((len(span), DEGREE + 1, 3))
@@ -130,7 +130,7 @@ _FALLING = np.array([[factorial(j) / factorial(j - order) if j >= order else 0.0
 """j! / (j - order)!: the factor of tau^(j - order) in the order-th derivative."""
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _horner(coefficients, starts, span, t, order):
     """Return the order-th derivative (N, 3) of the Taylor pieces at times t in ``span``."""
     out = np.empty((len(t), coefficients.shape[2]))

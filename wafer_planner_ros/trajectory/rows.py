@@ -14,9 +14,9 @@ optimisation (``timing_problem``) uses the duration columns alone; the whole-cur
 optimisation (``shape_problem``) the control points' as well.
 """
 
-from numba import njit
 import numpy as np
 
+from wafer_planner_ros.kernels import kernel
 from wafer_planner_ros.trajectory.bspline import DEGREE, knots_from_intervals, raise_degree
 from wafer_planner_ros.trajectory.bspline import WINDOW
 
@@ -26,7 +26,7 @@ LOCAL = WINDOW - 2
 """Durations a sample depends on: h_{s-2}..h_{s+2}."""
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def control_rows(points, intervals, limits, point_column, duration_column, scale,
                  values_out, jacobian, gradients=True):
     """
@@ -94,7 +94,7 @@ def control_row_count(count: int, orders: int) -> int:
     return sum(3 * (count - 1 - order) for order in range(orders))
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def basis_all(h, fraction, out):
     """
     Write B^(r)_j (3, 4) into ``out``: the r-th derivative weights of P_s..P_{s+3}.
@@ -135,7 +135,7 @@ def basis_all(h, fraction, out):
         out[2, r] += weight * velocity[r]
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _kinematic_partials(link_lengths, q, qd, qdd, dax, day):
     """
     Return the wafer acceleration (ax, ay); write d ax / d q^(r)_i into dax (3, 3), day.
@@ -167,7 +167,7 @@ def _kinematic_partials(link_lengths, q, qd, qdd, dax, day):
     return ax, ay
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def sample_rows(padded, points, span, fraction, link_lengths, limits, positions,
                 gradients=True):
     """
@@ -253,7 +253,7 @@ def sample_rows(padded, points, span, fraction, link_lengths, limits, positions,
     return values, by_h, by_p
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def scatter_rows(jacobian, values_out, row0, values, by_h, by_p, span, point_column,
                  duration_column, scale):
     """

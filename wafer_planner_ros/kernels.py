@@ -1,0 +1,138 @@
+"""
+Compiled kernels: numba functions that import numba only when one is first called.
+
+Importing numba and loading its first kernel costs about 0.3 s, more than half of the
+node's start-up budget; the node is ready before any kernel runs and loads them just after
+(``node.serving.warm_up``). A function decorated with :func:`kernel` is a :class:`Kernel`:
+calling it calls its numba dispatcher (``numba.njit(cache=True, ...)``), made on the first
+call. The dispatcher is made from a copy of the function whose globals name the compiled
+form of every other kernel it calls, so kernels call kernels in compiled code as numba
+functions do. ``Kernel.interpreted`` runs the same code as plain Python (the kernels it
+calls interpreted too): the cell file's polygons are checked that way when they are small,
+so that reading a cell needs no numba. :data:`objmode` stands for ``numba.objmode`` in a
+kernel (a no-op when interpreted).
+
+Only this module imports numba (a contract in ``setup.cfg``). ``NUMBA_CACHE_DIR`` is read
+when numba is imported, on the first call of a kernel: set it before (the node does).
+"""
+
+import contextlib
+import threading
+import types
+from typing import Callable, List
+
+_LOCK = threading.RLock()
+_KERNELS: List['Kernel'] = []
+
+
+class _ObjectMode:
+    """The stand-in for ``numba.objmode`` (see the module's description)."""
+
+    def __call__(self, **types):
+        """Return a context that does nothing (interpreted code is Python already)."""
+        return contextlib.nullcontext()
+
+
+objmode = _ObjectMode()
+
+
+class Kernel:
+    """A numba kernel compiled on its first call; see the module's description."""
+
+    def __init__(self, function: Callable, options: dict):
+        """Keep the Python function and the ``numba.njit`` options (``cache=True`` added)."""
+        self.function = function
+        self.options = {'cache': True, **options}
+        self._compiled = None
+        self._interpreted = None
+        self.__name__ = function.__name__
+        self.__qualname__ = function.__qualname__
+        self.__doc__ = function.__doc__
+        self.__module__ = function.__module__
+        self.__wrapped__ = function
+
+    def __call__(self, *args):
+        """Call the compiled kernel (numba is imported and the kernel made, first time)."""
+        compiled = self._compiled
+        if compiled is None:
+            compiled = self.compiled
+        return compiled(*args)
+
+    def __repr__(self) -> str:
+        """Say which function this is."""
+        return f'<kernel {self.__module__}.{self.__qualname__}>'
+
+    @property
+    def compiled(self):
+        """Return the numba dispatcher (made, not yet compiled, on first use)."""
+        with _LOCK:
+            if self._compiled is None:
+                import numba
+                function = _rebound(self.function, lambda k: k.compiled, numba.objmode)
+                self._compiled = numba.njit(**self.options)(function)
+            return self._compiled
+
+    @property
+    def interpreted(self) -> Callable:
+        """Return the function as plain Python, calling the other kernels interpreted."""
+        with _LOCK:
+            if self._interpreted is None:
+                self._interpreted = _rebound(self.function, lambda k: k.interpreted, objmode)
+            return self._interpreted
+
+    def compiled_count(self) -> int:
+        """Return how many signatures of this kernel were compiled, not loaded from cache."""
+        compiled = self._compiled
+        return 0 if compiled is None else sum(compiled.stats.cache_misses.values())
+
+
+def kernel(function: Callable = None, **options):
+    """Make ``function`` a :class:`Kernel`; used bare or with ``numba.njit`` options."""
+    def decorate(function: Callable) -> Kernel:
+        made = Kernel(function, options)
+        with _LOCK:
+            _KERNELS.append(made)
+        return made
+    return decorate if function is None else decorate(function)
+
+
+def loaded() -> bool:
+    """Return whether numba has been imported by a kernel's first call."""
+    return any(k._compiled is not None for k in _KERNELS)
+
+
+def sized(work: int, limit: int) -> Callable[[Kernel], Callable]:
+    """
+    Return how to run kernels on a problem of size ``work``: ``form(kernel)(*args)``.
+
+    Interpreted when ``work`` is at most ``limit`` and numba is not loaded yet (a small
+    check at start-up, cheaper than loading numba), compiled otherwise.
+    """
+    if work <= limit and not loaded():
+        return lambda k: k.interpreted
+    return lambda k: k
+
+
+def compiled_count() -> int:
+    """Return how many kernel signatures this process compiled rather than loaded."""
+    with _LOCK:
+        kernels = list(_KERNELS)
+    return sum(k.compiled_count() for k in kernels)
+
+
+def _rebound(function: Callable, form: Callable[[Kernel], Callable], mode) -> Callable:
+    """Return a copy of ``function`` whose global kernels are ``form`` of each."""
+    names = dict(function.__globals__)
+    for name in function.__code__.co_names:
+        value = names.get(name)
+        if isinstance(value, Kernel):
+            names[name] = form(value)
+        elif value is objmode:
+            names[name] = mode
+    copy = types.FunctionType(function.__code__, names, function.__name__,
+                              function.__defaults__, function.__closure__)
+    copy.__qualname__ = function.__qualname__
+    copy.__doc__ = function.__doc__
+    copy.__kwdefaults__ = function.__kwdefaults__
+    copy.__module__ = function.__module__
+    return copy
