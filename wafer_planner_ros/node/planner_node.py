@@ -37,6 +37,7 @@ from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.errors import ErrorCode
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
+from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.worker import PlanningWorker
@@ -79,6 +80,10 @@ class WaferPlannerNode(Node):
         self._roadmap_pub = self.create_publisher(MarkerArray, '~/roadmap_markers', LATCHED)
         self._path_pub = self.create_publisher(MarkerArray, '~/path_markers', RELIABLE)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._live = LiveView(self.get_fully_qualified_name(), [
+            self._roadmap_pub, self._path_pub, self._trajectory_pub, self._result_pub,
+            self._diagnostics_pub], self._roadmap_pub, self.log)
+        self._live.start(self.settings.live_host, self.settings.live_port)
         # Raw: the request's bytes are recorded exactly as they arrived.
         self._joint_sub = self.create_subscription(
             JointTrajectory, '~/plan_request', self._on_joint_request, RELIABLE, raw=True)
@@ -197,15 +202,18 @@ class WaferPlannerNode(Node):
                 self._late_records += 1
             for publisher, data in out:
                 publisher.publish(data)
+                self._live.publish(publisher, data)
         else:
-            (self._roadmap_pub if kind is Sent.MARKERS else self._path_pub).publish(msg)
+            publisher = self._roadmap_pub if kind is Sent.MARKERS else self._path_pub
+            publisher.publish(msg)
+            self._live.publish(publisher, msg)
 
     # ----------------------------------------------------------------- services, health
 
     def status(self) -> dict:
         """Return the node's state (``~/get_status``)."""
         return {**self._worker.status(), **self._recording.status(),
-                'answers_before_recorded': self._late_records}
+                'answers_before_recorded': self._late_records, **self._live.status()}
 
     @guarded_service
     def _on_get_status(self, request, response):
@@ -288,7 +296,9 @@ class WaferPlannerNode(Node):
     def _publish_health(self) -> None:
         try:
             self._sync_recording_enabled()  # a recording that stopped by itself: false
-            self._diagnostics_pub.publish(self._health())
+            health = self._health()
+            self._diagnostics_pub.publish(health)
+            self._live.publish(self._diagnostics_pub, health)
         except Exception as exc:  # noqa: B902 - health is reported again in a second
             self.log.error(f'/diagnostics not published: {reason_of(exc)}')
 
@@ -349,6 +359,8 @@ class WaferPlannerNode(Node):
                         self._log_closed(*self._stop_recording())
             except Exception as exc:  # noqa: B902 - the parameters are set all the same
                 self.log.error(f'recording the parameters failed: {reason_of(exc)}')
+            if any(name.startswith('live.') for name in changed):
+                self._live.start(settings.live_host, settings.live_port)  # never raises
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:
@@ -357,6 +369,7 @@ class WaferPlannerNode(Node):
         # First: a worker busy building a roadmap may outlast a launcher's patience, and
         # answers not yet published are not recorded either.
         self._log_closed(*self._stop_recording())
+        self._live.stop()
         self._worker.join(timeout=30.0)
         super().destroy_node()
 

@@ -53,6 +53,12 @@ PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('recording.directory', '~/.ros/wafer_planner/recordings',
               'where the recordings are written'),
     Parameter('markers.frame_id', 'efem', 'frame of the published markers'),
+    Parameter('live.port', 0,
+              'TCP port of the Foxglove WebSocket live view (needs foxglove-sdk); 0: off',
+              0, 65535),
+    Parameter('live.host', '0.0.0.0',
+              'address the live view listens on (0.0.0.0: every interface; 127.0.0.1: '
+              'this machine only)'),
 )
 
 _BY_NAME = {p.name: p for p in PARAMETERS}
@@ -75,6 +81,9 @@ class NodeSettings:
     recording_enabled: bool
     recording_directory: Path
     frame_id: str
+    live_port: int
+    """TCP port of the Foxglove live view; 0: off."""
+    live_host: str
 
 
 def check(name: str, value) -> None:
@@ -91,7 +100,7 @@ def check(name: str, value) -> None:
         raise ValueError(f'{name} must be finite, got {value!r}')
     if spec.low is not None and not spec.low <= value <= spec.high:
         raise ValueError(f'{name} must be in [{spec.low}, {spec.high}], got {value!r}')
-    if name in ('markers.frame_id', 'recording.directory') and not value.strip():
+    if name in ('markers.frame_id', 'recording.directory', 'live.host') and not value.strip():
         raise ValueError(f'{name} must not be empty')
 
 
@@ -114,4 +123,5 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         max_queue=merged['planning.max_queue'],
         recording_enabled=merged['recording.enabled'],
         recording_directory=Path(merged['recording.directory']).expanduser(),
-        frame_id=merged['markers.frame_id'])
+        frame_id=merged['markers.frame_id'],
+        live_port=merged['live.port'], live_host=merged['live.host'].strip())
