@@ -5,8 +5,15 @@ import os
 import subprocess
 import sys
 
+import numpy as np
+
+from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.roadmap import main
+from wafer_planner_ros.geometry.planar import cross2
+from wafer_planner_ros.plotting import plot_roadmap
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.roadmap.graph import RoadmapSettings
 
 
 def _run(capsys, *argv):
@@ -38,6 +45,33 @@ def test_text_output_and_plot(tmp_path, capsys):
                   'cache', 'hash'):
         assert f'\n{label}' in '\n' + out
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20_000
+
+
+def test_the_roadmap_figure_names_joints_stations_and_branches_as_the_cell_does(tmp_path):
+    text = default_cell_path().read_text()
+    assert text.count('joint_names: [shoulder, elbow, wrist]') == 1
+    cell = Cell.from_text(text.replace('joint_names: [shoulder, elbow, wrist]',
+                                       'joint_names: [waist, arm, hand]'), 'renamed.yaml')
+    roadmap = load_or_build(cell, RoadmapSettings(nodes=300), cache_dir=None).roadmap
+    figure = plot_roadmap(cell, roadmap, tmp_path / 'roadmap.png')
+    drawing, joints = figure.axes
+    assert (joints.get_xlabel(), joints.get_ylabel(), joints.get_zlabel()) == (
+        'waist (rad)', 'arm (rad)', 'hand (rad)')
+    texts = drawing.texts
+    assert {t.get_text() for t in texts} == set(cell.stations) | {'elbow right', 'elbow left'}
+    # Each branch is named at its elbow, in words that match what the drawing shows: seen
+    # from above, the elbow right or left of the line from the shoulder to the wrist.
+    base = cell.robot.base
+    elbows = []
+    for station in cell.stations.values():
+        for config in station.configs:
+            _, elbow, wrist, _ = cell.robot.arm.joint_points(config.q)
+            side = 'elbow right' if cross2(wrist - base, elbow - base) < 0 else 'elbow left'
+            elbows.append((tuple(np.round(elbow, 9)), side))
+    named = [(tuple(np.round(t.xy, 9)), t.get_text()) for t in texts
+             if t.get_text().startswith('elbow ')]
+    assert sorted(named) == sorted(elbows)
+    assert {side for _, side in elbows} == {'elbow right', 'elbow left'}
 
 
 def test_json_file_and_test_cell(tmp_path, capsys):

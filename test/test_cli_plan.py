@@ -3,10 +3,13 @@
 import json
 
 import numpy as np
+import pytest
 
 from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.plan import main
+from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.plotting import plot_trajectory
 
 
 def _run(capsys, *argv):
@@ -38,6 +41,37 @@ def test_joint_angles_and_plot(roadmap_cache, capsys, tmp_path, default_cell):
                         '--plot', str(png))
     assert code == 0 and 'ok, cycle time' in out
     assert png.read_bytes()[:4] == b'\x89PNG' and png.stat().st_size > 50_000
+
+
+def test_the_plan_figure_marks_the_verified_closest_approach_and_names_branches(
+        default_cell, default_roadmap, tmp_path):
+    planner = Planner(default_cell, default_roadmap)  # the corridor curve: milliseconds
+    words = {1: 'elbow right', -1: 'elbow left'}
+    jerk = default_cell.robot.limits.jerk
+    for branches in ((1, 1), (-1, 1)):
+        result = planner.plan('loadport2', 'loadlock1', branches=branches)
+        figure = plot_trajectory(default_cell, result, tmp_path / 'plan.png')
+        motion, bar = figure.axes[:2]
+        assert motion.get_title().startswith(
+            f'loadport2 ({words[branches[0]]}) -> loadlock1 ({words[branches[1]]}): '
+            f'cycle time {result.cycle_time:.3f} s')
+        legend = [text.get_text() for text in motion.get_legend().get_texts()]
+        closest = [text for text in legend if text.startswith('closest approach')]
+        assert closest == [f'closest approach: {result.min_clearance * 1000:.1f} mm, '
+                           + closest[0].split(' mm, ')[1]]
+        # Marked where it is: the gap drawn ends on the wall, the distance shown beside it.
+        gap = next(line for line in motion.lines if line.get_label() == closest[0])
+        wall = np.array([gap.get_xdata()[1], gap.get_ydata()[1]])
+        assert any(text.get_text() == f'{result.min_clearance * 1000:.1f} mm'
+                   and np.allclose(text.xy, wall) for text in motion.texts)
+        assert abs(abs(wall[1]) - 0.45) < 1e-9 or abs(abs(wall[0]) - 0.85) < 1e-9
+        assert set(default_cell.stations) <= {text.get_text() for text in motion.texts}
+        assert bar.get_ylabel() == 'time of the robot outlines (s)'
+        assert bar.get_ylim() == pytest.approx((0.0, result.cycle_time))
+        panel = next(axis for axis in figure.axes if axis.get_ylabel().startswith('jerk'))
+        assert panel.get_ylabel() == 'jerk (rad/s³)'
+        assert sorted(line.get_ydata()[0] for line in panel.lines
+                      if line.get_linestyle() == '--') == sorted(np.concatenate([-jerk, jerk]))
 
 
 def test_all_pairs_table_and_json_file(roadmap_cache, capsys, tmp_path):

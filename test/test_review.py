@@ -1,7 +1,10 @@
 """``wafer-review``: a figure per query and an index page, from a recording made here."""
 
+from datetime import datetime, timedelta, timezone
 import json
+import math
 from pathlib import Path
+import re
 import time
 
 from matplotlib.image import imread
@@ -11,8 +14,9 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
 from wafer_planner_ros.cell.model import default_cell_path
-from wafer_planner_ros.cli.common import EXIT_OK, EXIT_USAGE, run
-from wafer_planner_ros.cli.review import main
+from wafer_planner_ros.cli.common import EXIT_OK, EXIT_USAGE, recorded_queries, run
+from wafer_planner_ros.cli.review import main, render
+from wafer_planner_ros.cli.review_index import THUMBNAIL_WIDTH
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.node import messages
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
@@ -30,12 +34,15 @@ TOPICS = [Topic(STATION, 'std_msgs/msg/String'),
           Topic(MARKERS, 'visualization_msgs/msg/MarkerArray')]
 SPECIAL_ID = '<b>&"$x$'
 """A request id that HTML and matplotlib's mathtext would both misread."""
+IN_THE_WALL = [0.139339, 2.862914, -1.431457]
+"""loadport2's pose 60 mm towards the loadport wall: the wafer 20 mm into it, nothing else."""
 REQUESTS = [('q1', 'loadport1', 'loadlock1'),
             (SPECIAL_ID, 'loadlock1', 'loadport2'),
             ('q3', 'loadport1', 'nowhere'),
-            ('', None, None)]
+            ('', None, None),
+            ('q5', IN_THE_WALL, 'loadlock1')]
 """(id, from, to) as a cell controller sent them; None: a request that is not JSON."""
-PLANNED, REFUSED = (1, 2), (3, 4)
+PLANNED, REFUSED = (1, 2), (3, 4, 5)
 """The query numbers that have a trajectory, and those refused."""
 
 
@@ -100,7 +107,7 @@ def test_a_figure_per_query_and_an_index(bag, tmp_path, capsys):
     code, stdout, stderr = review(capsys, bag, '--out', out)
     assert code == EXIT_OK
     assert stdout.strip() == str(out / 'index.html')
-    assert 'review: 4/4' in stderr and 'warning' not in stderr
+    assert 'review: 5/5' in stderr and 'warning' not in stderr
     shapes = {}
     for number in PLANNED + REFUSED:
         png = out / f'query_{number:04d}.png'
@@ -117,8 +124,9 @@ def test_a_figure_per_query_and_an_index(bag, tmp_path, capsys):
     for number in REFUSED:
         height, width = shapes[number]
         assert width / height == pytest.approx(11 / 7, abs=0.02)
-    assert sorted(p.name for p in out.iterdir()) == ['index.html'] + [
-        f'query_{n:04d}.png' for n in (1, 2, 3, 4)]
+    assert sorted(p.name for p in out.iterdir()) == ['index.html'] + sorted(
+        [f'query_{n:04d}.png' for n in range(1, 6)]
+        + [f'thumb_{n:04d}.png' for n in range(1, 6)])
 
 
 def test_index_lists_every_query_escaped(bag, tmp_path, capsys, default_cell,
@@ -134,12 +142,13 @@ def test_index_lists_every_query_escaped(bag, tmp_path, capsys, default_cell,
     assert SPECIAL_ID not in page and '<b>' not in page
     assert 'UNKNOWN_STATION' in rows[2] and 'nowhere' in rows[2] and 'error' in rows[2]
     assert 'INVALID_REQUEST' in rows[3]
-    cycle = float(rows[0].split('<td>')[8].split('<')[0])
+    assert 'START_IN_COLLISION' in rows[4]
+    cycle = float(_column(page, rows[0], 'cycle time (s)'))
     assert cycle == pytest.approx(
         Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock1').cycle_time,
         abs=1e-3)
     assert default_cell.name in page and default_roadmap.digest in page
-    assert 'INVALID_REQUEST 1, OK 2, UNKNOWN_STATION 1' in page
+    assert 'INVALID_REQUEST 1, OK 2, START_IN_COLLISION 1, UNKNOWN_STATION 1' in page
     assert 'ratio wafer x' in page and '(complete)' in page
 
 
@@ -150,12 +159,12 @@ def test_a_cut_recording_is_reviewed_with_a_warning(tmp_path, capsys, default_ce
     code, _, stderr = review(capsys, cut, '--out', tmp_path / 'out')
     assert code == EXIT_OK
     assert 'warning' in stderr and 'cut off' in stderr
-    assert sorted(p.name for p in (tmp_path / 'out').glob('*.png')) == [
+    assert sorted(p.name for p in (tmp_path / 'out').glob('query_????.png')) == [
         'query_0001.png', 'query_0002.png', 'query_0003.png']
     page = (tmp_path / 'out' / 'index.html').read_text(encoding='utf-8')
     assert 'cut off' in page
     rows = [line for line in page.splitlines() if line.startswith('<tr class=')]
-    assert [row.split('"')[1] for row in rows] == ['error', 'ok', 'no-answer']
+    assert [row.split('"')[1].split()[0] for row in rows] == ['error', 'ok', 'no-answer']
     # The unanswered request is listed as it was sent.
     assert '<td>q-late</td>' in rows[2] and '<td>loadlock2</td>' in rows[2]
 
@@ -167,3 +176,184 @@ def test_a_recording_without_requests_is_a_usage_error(tmp_path, capsys, default
     assert code == EXIT_USAGE
     assert 'no requests' in stderr and stdout == ''
     assert not (tmp_path / 'out').exists()
+
+
+def test_index_shows_when_each_request_was_received(bag, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv('TZ', 'JST-9')  # a POSIX zone 9 h east of UTC: no tz database needed
+    time.tzset()
+    try:
+        code, _, _ = review(capsys, bag, '--out', tmp_path)
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    assert code == EXIT_OK
+    page = (tmp_path / 'index.html').read_text(encoding='utf-8')
+    _, found = recorded_queries(str(bag), 'testing')
+    rows = _rows(page)
+    assert len(rows) == len(found) == len(REQUESTS)
+    for query, row in zip(found, rows):
+        shown = _column(page, row, 'received')
+        utc = re.search(r'(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}) UTC', shown).group(1)
+        local = re.search(r'<small>(\S+ \S+) JST \(UTC\+09:00\)</small>', shown).group(1)
+        moment = datetime.strptime(utc, '%Y-%m-%d %H:%M:%S.%f').replace(tzinfo=timezone.utc)
+        # The recorded log time of the request, to the millisecond shown.
+        shown_ns = (int(moment.replace(microsecond=0).timestamp()) * 10 ** 9
+                    + moment.microsecond * 1000)
+        assert 0 <= query.received_ns - shown_ns < 10 ** 6
+        assert abs(time.time() - moment.timestamp()) < 3600  # recorded now, not in 1970
+        assert datetime.strptime(local, '%Y-%m-%d %H:%M:%S.%f') == (
+            moment + timedelta(hours=9)).replace(tzinfo=None)
+    assert f'received: {_utc_text(found[0])} to {_utc_text(found[-1])}' in page
+
+
+def test_thumbnails_beside_the_figures_link_to_them(bag, tmp_path, capsys):
+    review(capsys, bag, '--out', tmp_path)
+    page = (tmp_path / 'index.html').read_text(encoding='utf-8')
+    assert THUMBNAIL_WIDTH == 320
+    for number, row in zip(PLANNED + REFUSED, _rows(page)):
+        figure, thumbnail = tmp_path / f'query_{number:04d}.png', tmp_path / f'thumb_{number:04d}.png'
+        assert thumbnail.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+        full, small = imread(figure), imread(thumbnail)
+        assert small.shape[1] == 320
+        assert small.shape[0] == round(full.shape[0] * 320 / full.shape[1])
+        # The figure made small: the same picture on average, not a blank or another one.
+        assert np.std(small[..., :3]) > 0.05
+        assert np.abs(small[..., :3].mean(axis=(0, 1))
+                      - full[..., :3].mean(axis=(0, 1))).max() < 0.01
+        assert (f'<a href="query_{number:04d}.png"><img src="thumb_{number:04d}.png" '
+                'alt=') in _column(page, row, 'figure')
+    # A figure smaller than a thumbnail is copied at its own size, not blown up.
+    review(capsys, bag, '--out', tmp_path / 'tiny', '--dpi', '20')
+    for number in PLANNED + REFUSED:
+        full, small = (imread(tmp_path / 'tiny' / f'{name}_{number:04d}.png')
+                       for name in ('query', 'thumb'))
+        assert small.shape[1] == min(320, full.shape[1])
+        assert small.shape[0] == round(full.shape[0] * small.shape[1] / full.shape[1])
+
+
+def test_flags_mark_exactly_the_queries_beyond_the_thresholds(bag, tmp_path, capsys):
+    _, found = recorded_queries(str(bag), 'testing')
+    values = {query.number: query.result.values for query in found}
+    clearance = {n: float(v['min_clearance']) * 1000.0 for n, v in values.items()
+                 if 'min_clearance' in v}
+    planning = {n: float(v['planning_time_ms']) for n, v in values.items()}
+    assert sorted(clearance) == list(PLANNED) and clearance[1] != clearance[2]
+    assert {planning[n] for n in REFUSED} == {0.2}  # as the recording above answers them
+    low, high = sorted(clearance.values())
+    closest = min(clearance, key=clearance.get)
+    cases = [  # (--flag-clearance, --flag-planning), the queries flagged
+        ((high, 0), {closest}),                                 # at the threshold: not below
+        ((math.nextafter(high, math.inf), 0), set(PLANNED)),
+        ((low, 0), set()),
+        ((0, 0.2), set(PLANNED)),                               # at the threshold: not above
+        ((0, max(planning[1], planning[2])), set()),
+        ((0, min(planning[1], planning[2])), {max(PLANNED, key=planning.get)}),
+        ((0, math.nextafter(0.2, 0.0)), set(PLANNED + REFUSED)),
+    ]
+    for (mm, ms), expected in cases:
+        out = tmp_path / f'{mm}_{ms}'
+        code, _, _ = review(capsys, bag, '--out', out, '--flag-clearance', repr(mm),
+                            '--flag-planning', repr(ms))
+        assert code == EXIT_OK
+        page = (out / 'index.html').read_text(encoding='utf-8')
+        rows = _rows(page)
+        flagged = {n for n, row in zip(PLANNED + REFUSED, rows)
+                   if 'flagged' in row.split('"')[1].split()}
+        assert flagged == expected, (mm, ms)
+        summary = page.split('<div class="flags">')[1].split('</div>')[0]
+        assert f'<strong>{len(expected)} flagged</strong>' in summary
+        assert set(map(int, re.findall(r'href="#q(\d+)"', summary))) == expected
+        for number, row in zip(PLANNED + REFUSED, rows):
+            shown = _column(page, row, 'flags')
+            assert ('clearance' in shown) == (number in expected and mm > 0), (mm, ms)
+            assert ('planning' in shown) == (number in expected and ms > 0), (mm, ms)
+    # The defaults: 1 mm and 400 ms.
+    review(capsys, bag, '--out', tmp_path / 'defaults')
+    page = (tmp_path / 'defaults' / 'index.html').read_text(encoding='utf-8')
+    assert '(clearance below 1 mm, planning above 400 ms)' in page
+
+
+@pytest.mark.parametrize('option, value', [('--flag-clearance', '-1'),
+                                           ('--flag-planning', 'nan'),
+                                           ('--flag-planning', 'inf')])
+def test_a_bad_flag_threshold_is_a_usage_error_naming_it(bag, tmp_path, capsys, option,
+                                                         value):
+    code, _, stderr = review(capsys, bag, '--out', tmp_path, option, value)
+    assert code == EXIT_USAGE
+    assert option in stderr and value in stderr
+
+
+def test_a_motion_figure_shows_times_stations_jerk_and_the_closest_approach(
+        bag, tmp_path, default_cell):
+    _, found = recorded_queries(str(bag), 'testing')
+    words = {1: 'elbow right', -1: 'elbow left'}
+    jerk_limit = default_cell.robot.limits.jerk
+    for query in found[:2]:
+        values = query.result.values
+        figure = render(query, default_cell, tmp_path / 'motion.png')
+        motion, bar = figure.axes[:2]
+        # The closest approach, found on the samples, is the one the planner verified.
+        legend = [text.get_text() for text in motion.get_legend().get_texts()]
+        closest = [text for text in legend if text.startswith('closest approach: ')]
+        assert len(closest) == 1
+        assert float(closest[0].split()[2]) == pytest.approx(
+            float(values['min_clearance']) * 1000.0, abs=0.06)
+        assert re.search(r'mm, (shoulder|elbow|wrist) link|wafer vs boundary', closest[0])
+        assert {text.get_text() for text in motion.texts} >= set(default_cell.stations)
+        assert bar.get_ylabel() == 'time of the robot outlines (s)'
+        assert bar.get_ylim() == pytest.approx((0.0, float(values['cycle_time'])), abs=0.011)
+        jerk = next(axis for axis in figure.axes if axis.get_ylabel().startswith('jerk'))
+        assert jerk.get_ylabel() == 'jerk (rad/s³, from samples)'
+        bounds = sorted(line.get_ydata()[0] for line in jerk.lines
+                        if line.get_linestyle() == '--')
+        assert bounds == pytest.approx(sorted(np.concatenate([-jerk_limit, jerk_limit])))
+        start, goal = json.loads(values['branches'])
+        heading = motion.get_title()
+        assert (f"{values['from']} ({words[start]}) -> {values['to']} ({words[goal]})"
+                in heading)
+        assert 'branches' not in heading and _utc_text(query) in heading
+
+
+def test_a_start_in_collision_figure_fills_the_colliding_body(bag, tmp_path, default_cell):
+    _, found = recorded_queries(str(bag), 'testing')
+    query = found[REFUSED[-1] - 1]
+    assert query.code == 'START_IN_COLLISION'
+    png = tmp_path / 'collision.png'
+    figure = render(query, default_cell, png)
+    axis = figure.axes[0]
+    legend = [text.get_text() for text in axis.get_legend().get_texts()]
+    assert 'start collides: wafer vs boundary, overlap 20.0 mm' in legend
+    assert sum('collides' in text for text in legend) == 1  # the wafer alone
+    # In the picture: the wafer filled light red round its centre (0, 0.32), the wall it
+    # hits (y = 0.45) drawn pure red.
+    image = imread(png)[..., :3]
+    height = image.shape[0]
+    scale = image.shape[1] / (figure.get_figwidth() * figure.dpi)
+    pixels = axis.transData.inverted()
+
+    def centre(mask):
+        rows, columns = np.nonzero(mask)
+        return pixels.transform(np.column_stack([columns, height - rows]) / scale).mean(axis=0)
+
+    red, green, blue = image[..., 0], image[..., 1], image[..., 2]
+    fill = (red > 0.95) & (np.abs(green - 0.55) < 0.06) & (np.abs(blue - 0.55) < 0.06)
+    wall = (red > 0.95) & (green < 0.1) & (blue < 0.1)
+    assert fill.sum() > 500 and wall.sum() > 500
+    np.testing.assert_allclose(centre(fill), [0.0, 0.32], atol=0.02)
+    assert centre(wall)[1] == pytest.approx(0.45, abs=0.01)
+
+
+def _rows(page: str) -> list:
+    return [line for line in page.splitlines() if line.startswith('<tr class=')]
+
+
+def _column(page: str, row: str, name: str) -> str:
+    """Return what a row shows under the header ``name``."""
+    names = re.findall(r'<th>(.*?)</th>', page)
+    return re.findall(r'<td>(.*?)</td>', row)[names.index(name)]
+
+
+def _utc_text(query) -> str:
+    seconds, rest = divmod(query.received_ns, 10 ** 9)
+    moment = datetime.fromtimestamp(seconds, timezone.utc)
+    return f'{moment:%Y-%m-%d %H:%M:%S}.{rest // 10 ** 6:03d} UTC'

@@ -13,6 +13,20 @@ import numpy as np
 from wafer_planner_ros.kernels import kernel
 
 
+ELBOW_WORDS = {1: 'elbow right', -1: 'elbow left'}
+"""
+Plain words for the elbow branches, by the sign of q2.
+
+Seen from above (z up), with q2 > 0 the elbow lies to the right of the line from the
+shoulder to the wrist, as a right arm bends; with q2 < 0, to the left.
+"""
+
+
+def elbow_words(elbow) -> str:
+    """Return 'elbow right' (+1), 'elbow left' (-1) or '' (None: joint angles, no branch)."""
+    return '' if elbow is None else ELBOW_WORDS[1 if elbow >= 0 else -1]
+
+
 @dataclass(frozen=True)
 class IkSolution:
     """One inverse-kinematics branch of a wafer pose."""
