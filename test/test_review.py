@@ -211,7 +211,8 @@ def test_thumbnails_beside_the_figures_link_to_them(bag, tmp_path, capsys):
     page = (tmp_path / 'index.html').read_text(encoding='utf-8')
     assert THUMBNAIL_WIDTH == 320
     for number, row in zip(PLANNED + REFUSED, _rows(page)):
-        figure, thumbnail = tmp_path / f'query_{number:04d}.png', tmp_path / f'thumb_{number:04d}.png'
+        figure = tmp_path / f'query_{number:04d}.png'
+        thumbnail = tmp_path / f'thumb_{number:04d}.png'
         assert thumbnail.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
         full, small = imread(figure), imread(thumbnail)
         assert small.shape[1] == 320
