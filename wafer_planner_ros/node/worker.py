@@ -21,8 +21,6 @@ import threading
 import time
 from typing import Callable, Optional
 
-from rclpy.serialization import serialize_message
-
 from wafer_planner_ros.cell.document import read_cell_file
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
@@ -372,8 +370,8 @@ class PlanningWorker:
                 self.load_failed, self.last_load_error = False, ''
                 self.lock.notify_all()
         try:
-            roadmap_markers = serialize_message(markers.roadmap_markers(
-                cell, roadmap, settings.frame_id, self._stamp()))
+            roadmap_markers = markers.roadmap_markers(cell, roadmap, settings.frame_id,
+                                                      self._stamp())
             self._send((Sent.MARKERS, roadmap_markers, 0))
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
