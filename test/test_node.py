@@ -151,10 +151,13 @@ def test_late_subscriber_gets_the_roadmap_markers(harness, default_cell):
     assert {'enclosure', 'stations', 'station_labels', 'roadmap_nodes', 'roadmap_edges'} \
         <= namespaces
     labels = {m.text for m in inbox[0].markers if m.ns == 'station_labels'}
-    assert {'loadport1 (+1)', 'loadport1 (-1)'} <= labels
+    assert {'loadport1 (elbow right)', 'loadport1 (elbow left)'} <= labels
     nodes = next(m for m in inbox[0].markers if m.ns == 'roadmap_nodes')
     assert len(nodes.points) == harness.status()['nodes']
-    assert all(m.header.frame_id == 'efem' for m in inbox[0].markers)
+    joint_space = {'roadmap_nodes', 'roadmap_edges', 'joint_space_box', 'joint_space_labels',
+                   'joint_space_stations'}
+    assert all(m.header.frame_id == ('efem_joint_space' if m.ns in joint_space else 'efem')
+               for m in inbox[0].markers)
 
 
 def test_services_answer(harness, monkeypatch, default_roadmap):

@@ -35,7 +35,13 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+try:  # in a standard ROS install; not among the PyPI wheels: then no static transform
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
+
 from wafer_planner_ros.errors import ErrorCode
+from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.messages import Sent
@@ -79,6 +85,8 @@ class WaferPlannerNode(Node):
         self._result_pub = self.create_publisher(DiagnosticStatus, '~/result', RELIABLE)
         self._roadmap_pub = self.create_publisher(MarkerArray, '~/roadmap_markers', LATCHED)
         self._path_pub = self.create_publisher(MarkerArray, '~/path_markers', RELIABLE)
+        self._tf_pub = None if TFMessage is None else \
+            self.create_publisher(TFMessage, '/tf_static', LATCHED)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._live = LiveView(self.get_fully_qualified_name(), [
             self._roadmap_pub, self._path_pub, self._trajectory_pub, self._result_pub,
@@ -207,6 +215,19 @@ class WaferPlannerNode(Node):
             publisher = self._roadmap_pub if kind is Sent.MARKERS else self._path_pub
             publisher.publish(msg)
             self._live.publish(publisher, msg)
+            if kind is Sent.MARKERS and self._tf_pub is not None:
+                self._tf_pub.publish(self._joint_space_transform())
+
+    def _joint_space_transform(self):
+        """Return the static transform that puts the joint-space markers beside the cell."""
+        from geometry_msgs.msg import TransformStamped
+        msg = TransformStamped(child_frame_id=markers.joint_space_frame(self.settings.frame_id))
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.settings.frame_id
+        offset = markers.joint_space_offset(self._worker.cell).tolist()
+        t = msg.transform.translation
+        t.x, t.y, t.z = offset
+        return TFMessage(transforms=[msg])
 
     # ----------------------------------------------------------------- services, health
 

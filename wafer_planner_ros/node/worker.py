@@ -21,8 +21,6 @@ import threading
 import time
 from typing import Callable, Optional
 
-from rclpy.serialization import serialize_message
-
 from wafer_planner_ros.cell.document import read_cell_file
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
@@ -399,8 +397,8 @@ class PlanningWorker:
             f'(ready {time.monotonic() - started:.2f} s after loading began'
             f'{since_process_start()})')
         try:
-            roadmap_markers = serialize_message(markers.roadmap_markers(
-                cell, roadmap, settings.frame_id, self._stamp()))
+            roadmap_markers = markers.roadmap_markers(cell, roadmap, settings.frame_id,
+                                                      self._stamp())
             self._send((Sent.MARKERS, roadmap_markers, 0))
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture

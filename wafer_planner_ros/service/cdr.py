@@ -3,9 +3,8 @@ The CDR bytes of the messages the node sends most: trajectories (from arrays) an
 
 The recorder writes the very bytes that were published, and independent readers accept
 them. rclpy's own serialiser leaves alignment padding uninitialised and, after empty
-float64 sequences (a trajectory point's effort), can append bytes that ``rosbags`` rejects;
-the markers, which have no such sequences, are serialised by rclpy (the tests read them
-back with ``rosbags``).
+float64 sequences (a trajectory point's effort), can append bytes that ``rosbags`` rejects.
+The markers are encoded with the same ``Writer`` (``marker_cdr``).
 
 Building hundreds of ``JointTrajectoryPoint`` objects and letting rclpy convert them costs
 milliseconds per plan; the bytes, which ``Publisher.publish`` takes as they are, come from
@@ -24,7 +23,7 @@ def joint_trajectory(stamp_sec: int, stamp_nanosec: int, frame_id: str,
                      joint_names: Sequence[str], times: np.ndarray, positions: np.ndarray,
                      velocities: np.ndarray, accelerations: np.ndarray) -> bytes:
     """Return the serialised message: points at ``times`` (s) with the given (N, J) rows."""
-    writer = _Writer()
+    writer = Writer()
     writer.int32(stamp_sec)
     writer.uint32(stamp_nanosec)
     writer.string(frame_id)
@@ -55,7 +54,7 @@ def joint_trajectory(stamp_sec: int, stamp_nanosec: int, frame_id: str,
 def diagnostic_status(level: int, name: str, message: str, hardware_id: str,
                       values: Sequence[Tuple[str, str]]) -> bytes:
     """Return a serialised ``diagnostic_msgs/DiagnosticStatus`` (``level``: 0-3)."""
-    writer = _Writer()
+    writer = Writer()
     writer.payload.append(level)
     for text in (name, message, hardware_id):
         writer.string(text)
@@ -86,7 +85,7 @@ def _point_layout(joints: int) -> np.dtype:
                      'itemsize': offset + 12})
 
 
-class _Writer:
+class Writer:
     """Append CDR primitives to a payload, aligning each to its size."""
 
     def __init__(self):
@@ -108,12 +107,24 @@ class _Writer:
         self.uint32(len(data))
         self.payload += data
 
-    def doubles(self, values) -> None:
-        values = np.asarray(values, '<f8')
-        self.uint32(len(values))
-        if len(values):
-            self._align(8)
+    def boolean(self, value: bool) -> None:
+        self.payload.append(1 if value else 0)
+
+    def fixed(self, values, dtype: str) -> None:
+        """Append numbers of one primitive type, each aligned to its size, with no count."""
+        values = np.ascontiguousarray(values, dtype)
+        if values.size:
+            self._align(values.dtype.itemsize)
             self.payload += values.tobytes()
+
+    def sequence(self, rows, dtype: str) -> None:
+        """Append a sequence: its length, then its rows (structs of one primitive type)."""
+        rows = np.asarray(rows, dtype)
+        self.uint32(len(rows))
+        self.fixed(rows, dtype)
+
+    def doubles(self, values) -> None:
+        self.sequence(np.asarray(values, '<f8').reshape(-1), '<f8')
 
     def serialised(self) -> bytes:
         return b'\x00\x01\x00\x00' + bytes(self.payload)
