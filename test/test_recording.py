@@ -5,6 +5,7 @@ The recorder itself is ROS-free; these tests use rclpy's serialiser and message 
 to make real CDR bytes to record, and ``rosbags`` to read them back independently.
 """
 
+import base64
 import errno
 import io
 import os
@@ -152,7 +153,11 @@ def test_a_full_disk_stops_the_recording_and_says_so(tmp_path):
         return _FillingDisk(path, room=12000)
     recorder = Recorder(tmp_path / 'bag', TOPICS, errors.append, opener)
     recorder._writer.sync = lambda: None  # an in-memory file has nothing to fsync
-    safe = [recorder.write_now([(TOPICS[0].name, serialize_message(String(data='x' * 500)),
+    rng = np.random.default_rng(7)  # chunks are compressed: text that does not compress
+
+    def text() -> str:
+        return base64.b64encode(rng.bytes(375)).decode()
+    safe = [recorder.write_now([(TOPICS[0].name, serialize_message(String(data=text())),
                                  k, k, k)]) for k in range(1, 30)]
     # Answered at once either way: True while the disk had room, then False.
     first_failure = safe.index(False)

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 
+from mcap.reader import make_reader
 from node_harness import isolate_dds, Peer, wait_for
 import pytest
 import rclpy
@@ -22,7 +23,7 @@ from sessions import mixed_requests
 REQUEST_TOPICS = ('/wafer_planner/plan_station_request', '/wafer_planner/plan_request')
 
 
-def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals):
+def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals, *parameters: str):
     """Run the node, send 50 mixed requests, stop it with ``stop`` after the 50th result."""
     isolate_dds(tmp_path)
     recordings = tmp_path / 'recordings'
@@ -30,7 +31,8 @@ def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals):
         [sys.executable, '-m', 'wafer_planner_ros.node.planner_node', '--ros-args',
          '-p', 'planning.station_table:=false', '-p', 'planning.optimise_budget:=0.0',
          '-p', f'roadmap.cache_dir:={roadmap_cache}', '-p', f'recording.directory:={recordings}',
-         '-p', 'planning.timeout:=60.0', '-p', 'planning.max_queue:=100'],
+         '-p', 'planning.timeout:=60.0', '-p', 'planning.max_queue:=100',
+         *(item for parameter in parameters for item in ('-p', parameter))],
         env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -66,8 +68,8 @@ def read_with_rosbags(bag) -> dict:
     return messages
 
 
-def check_complete(bag, peer, count: int = 50) -> None:
-    """Assert the bag holds every request, result and trajectory the peer saw."""
+def check_complete(bag, peer, count: int = 50, files: int = 1) -> None:
+    """Assert the bag holds every request, result and trajectory the peer saw (once)."""
     messages = read_with_rosbags(bag)
     assert sum(len(messages[topic]) for topic in REQUEST_TOPICS) == count
     results = messages['/wafer_planner/result']
@@ -83,7 +85,7 @@ def check_complete(bag, peer, count: int = 50) -> None:
         got = recorded[sent.header.frame_id]
         assert [list(p.positions) for p in got.points] == \
             [list(p.positions) for p in sent.points]
-    assert len(messages['/wafer_planner/roadmap_markers']) == 1
+    assert len(messages['/wafer_planner/roadmap_markers']) == files  # once in each file
 
 
 def replay(bag, roadmap_cache):
@@ -132,3 +134,35 @@ def test_a_killed_node_leaves_a_recording_that_recover_completes(tmp_path, roadm
     check_complete(bag, peer)
     replayed = replay(bag, roadmap_cache)
     assert replayed.returncode == 0, replayed.stdout + replayed.stderr
+
+
+def test_a_killed_node_leaves_a_split_recording_that_recover_completes(tmp_path, roadmap_cache,
+                                                                       default_cell):
+    """
+    1 MiB files, 2 ms samples (up to 0.65 MB an answer): several files, no query torn.
+
+    (A file holds at least one query: one larger than a file would make it larger.)
+    """
+    bag, peer, output, code = record_session(
+        tmp_path, roadmap_cache, default_cell, signal.SIGKILL,
+        'recording.max_bag_size:=1048576', 'trajectory.sample_period:=0.002')
+    assert code == -signal.SIGKILL
+    recovered = subprocess.run([sys.executable, '-m', 'wafer_planner_ros.cli.recover',
+                                str(bag)], capture_output=True, text=True, timeout=300)
+    assert recovered.returncode == 0, recovered.stdout + recovered.stderr
+    assert 'cut off' in recovered.stdout
+    files = sorted(bag.glob('*.mcap'), key=lambda f: int(f.stem.rsplit('_', 1)[1]))
+    assert len(files) >= 3, files
+    owner = {}
+    for file in files:
+        assert file.stat().st_size <= 1048576, file
+        with Reader(file) as reader:  # each file alone
+            assert reader.message_count > 0
+        with open(file, 'rb') as stream:
+            for _, channel, message in make_reader(stream).iter_messages():
+                if message.sequence:  # a query's request and answers: all in one file
+                    assert owner.setdefault(message.sequence, file) == file, message.sequence
+    check_complete(bag, peer, files=len(files))
+    replayed = replay(bag, roadmap_cache)
+    assert replayed.returncode == 0, replayed.stdout + replayed.stderr
+    assert '0 different' in replayed.stdout

@@ -8,7 +8,9 @@ time by more than ``--tolerance``). Answers that depended on the node's load at 
 (BUSY, TIMEOUT, ROADMAP_NOT_READY) or on a time budget (``planning.optimise_budget``) are
 listed but not replayed; an answer from the station table is re-planned with the
 whole-curve optimisation that made the table. ``--publish`` sends the
-recorded requests to a running node at their recorded pace and compares its answers.
+recorded requests to a running node at their recorded pace and compares its answers. A
+split recording is read whole (every file left in its directory, each holding the context
+of its queries), or one file of it alone.
 """
 
 import argparse
@@ -123,7 +125,8 @@ def _positive(text) -> bool:
 def main(argv=None) -> int:
     """Run wafer-replay."""
     parser = argparse.ArgumentParser(prog='wafer-replay', description=__doc__.split('\n')[1])
-    parser.add_argument('bag', metavar='BAG', help='recording directory (or its .mcap file)')
+    parser.add_argument('bag', metavar='BAG',
+                        help='recording directory (or one of its .mcap files)')
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument('--compare', action='store_true',
                       help='re-plan every request offline and compare (the default)')

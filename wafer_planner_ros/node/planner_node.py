@@ -45,7 +45,7 @@ from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.messages import Sent
-from wafer_planner_ros.node.recording import NodeRecording
+from wafer_planner_ros.node.recording import limits_of, NodeRecording
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
@@ -109,7 +109,8 @@ class WaferPlannerNode(Node):
             Topic(self._result_pub.topic_name, 'diagnostic_msgs/msg/DiagnosticStatus',
                   RELIABLE_OFFERED),
             Topic(self._roadmap_pub.topic_name, 'visualization_msgs/msg/MarkerArray',
-                  LATCHED_OFFERED)], self._roadmap_pub.topic_name, self._recording_failed)
+                  LATCHED_OFFERED)], self._roadmap_pub.topic_name, self._recording_failed,
+            lambda: limits_of(self.settings))
         self._recording.parameters(self._parameter_values())
         if self.settings.recording_enabled:
             self._start_recording()

@@ -3,14 +3,25 @@ The recorder: one ``BagWriter``, a lock, and a thread for the slow work (SPEC se
 
 Two ways in, one file order:
 
-- ``write_now`` (the node's executor: requests as they arrive, a query's trajectory and
-  result before they are published) writes in the calling thread and, with ``flush``,
+- ``write_now`` (the node's executor: each query's request, trajectory and result together,
+  before the answer is published) writes in the calling thread and, with ``flush``,
   hands everything to the operating system before it returns: once it returns True a
   process crash, even SIGKILL, cannot lose those messages. Writing in place costs a few
   hundred microseconds; handing the bytes to another thread and waiting for it costs
   milliseconds as soon as a planning thread holds the GIL.
 - ``record``, ``attach`` and ``metadata`` (the worker: roadmap markers, the cell file) only
   queue; the thread writes them. Queued items are written before any later ``write_now``.
+
+Splitting (``Limits``, read again before every group, so they may change at run time):
+the messages of one ``write_now`` call are a group, and groups are never split across
+files. Before a group is written, the current file is finished and the next one started
+when the group would take the finished file past ``max_bag_size`` (``projected_size``, an
+upper bound) or the file was opened ``max_bag_duration`` ago or more (by ``clock``), unless
+the file holds no group yet. Every new file first gets the ``preamble`` (what makes it
+readable alone: the node's cell file, roadmap load, parameters and markers). Before a new
+file is started, ``retention.prune`` removes the oldest files of the node's recordings
+beyond ``keep`` (counting the new one); syncing and closing the finished file, and
+rewriting the ``metadata.yaml`` of older recordings that lost files, are left to the thread.
 
 The thread also ``fsync``-s the file after every flush, against power loss. When a sync
 has hung for ``STALL`` seconds, or the writer lock cannot be had in that time, the disk is
@@ -27,14 +38,16 @@ did not reach the file because the recording had stopped, or failed while they w
 """
 
 from collections import deque
+from dataclasses import dataclass
 import enum
 import logging
 from pathlib import Path
 import threading
 import time
-from typing import Callable, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Mapping, Optional, Sequence, Tuple, Union
 
-from wafer_planner_ros.recording.bag import BagWriter, Topic
+from wafer_planner_ros.recording import retention
+from wafer_planner_ros.recording.bag import BagWriter, sync_and_close, Topic
 
 logger = logging.getLogger(__name__)
 
@@ -47,11 +60,34 @@ Message = Tuple[str, bytes, int, int, int]
 """(topic, serialised bytes, log time ns, publish time ns, sequence)."""
 
 
+@dataclass(frozen=True)
+class Limits:
+    """When a bag is split into a new file, and how many files are kept (0: no limit)."""
+
+    max_bag_size: int = 0
+    """Bytes a file may take, finished; 0: no split by size."""
+    max_bag_duration: float = 0.0
+    """Seconds after the opening of a file from which it takes no more groups; 0: never."""
+    keep: int = 0
+    """Files of the node's recordings kept in the recording directory; 0: all."""
+
+
+@dataclass(frozen=True)
+class Preamble:
+    """What a new file of the bag begins with, so that it can be read alone."""
+
+    attachments: Sequence[Tuple[str, bytes, int, str]] = ()
+    """(name, data, log time, media type)."""
+    metadata: Sequence[Tuple[str, Mapping[str, str]]] = ()
+    """(name, values)."""
+    messages: Sequence[Message] = ()
+
+
 class _Item(enum.Enum):
     """What the writer thread's queue holds: (kind, its arguments...)."""
 
     MESSAGE = enum.auto()
-    """(topic, data, log time, publish time, sequence)."""
+    """(messages, whether they are a group: ``write_now``'s, kept in one file, may split)."""
     FLUSH = enum.auto()
     """(an answer's, or not): a durability point."""
     ATTACH = enum.auto()
@@ -75,8 +111,21 @@ class Recorder:
     """Record to a new bag in ``directory``; see the module's description."""
 
     def __init__(self, directory: Path, topics: Sequence[Topic],
-                 on_error: Optional[Callable[[str], None]] = None, opener=open):
-        """Create the bag (raises ``OSError`` when it cannot) and start the thread."""
+                 on_error: Optional[Callable[[str], None]] = None, opener=open,
+                 limits: Union[Limits, Callable[[], Limits]] = Limits(),
+                 clock: Callable[[], int] = time.time_ns,
+                 preamble: Optional[Callable[[Optional[int]], Preamble]] = None):
+        """
+        Create the bag (raises ``OSError`` when it cannot) and start the thread.
+
+        ``limits``: the limits, or a function returning those in force. ``clock``: now, in
+        ns (the age of a file). ``preamble(since)``: what a new file begins with, where
+        ``since`` is the earliest log time of the group it is started for (None for the
+        first file).
+        """
+        self._limits = limits if callable(limits) else (lambda: limits)
+        self._clock = clock
+        self._preamble = preamble
         self._writer = BagWriter(directory, topics, opener)
         self.directory = self._writer.directory
         self._on_error = on_error
@@ -100,6 +149,23 @@ class Recorder:
         self.lost = 0
         """Answers (``write_now`` with ``flush``) not written, as ``dropped``."""
         self.written = 0
+        self.removed = 0
+        """Files removed by retention."""
+        self._chores = deque()
+        """What the thread does outside the writer lock after a split: (the finished
+        file's stream or None, the older bags whose metadata.yaml to rewrite)."""
+        self._groups = 0
+        """Groups written into the current file."""
+        self._opened = 0
+        """When the current file was started (``clock``)."""
+        try:
+            touched = self._prune(self._limits(), protect=self._writer.path)
+            if touched:
+                self._chores.append((None, touched))
+            self._begin_file(None)
+        except Exception:
+            self._writer.abandon()
+            raise
         self._thread = threading.Thread(target=self._run, name='wafer_planner_recorder',
                                         daemon=True)
         self._thread.start()
@@ -123,8 +189,7 @@ class Recorder:
                     self._count_dropped(len(messages), flush)
                     return False
                 self._drain()
-                for message in messages:
-                    self._writer.write(*message)
+                self._write_group(messages)
                 if flush:
                     self._writer.flush()
                 self._check()
@@ -138,8 +203,8 @@ class Recorder:
             if flush:
                 self._want_sync()
             return True
-        for message in messages:  # a stalled disk: the thread writes them when it can
-            self._put((_Item.MESSAGE, *message))
+        # A stalled disk: the thread writes them when it can.
+        self._put((_Item.MESSAGE, tuple(messages), True))
         if flush:
             self._put((_Item.FLUSH, True))
         return False
@@ -153,8 +218,8 @@ class Recorder:
 
     def record(self, topic: str, data: bytes, log_time: int, publish_time: int,
                sequence: int = 0) -> None:
-        """Queue one serialised message (times in ns since the epoch)."""
-        self._put((_Item.MESSAGE, topic, data, log_time, publish_time, sequence))
+        """Queue one serialised message (times in ns since the epoch); it never splits."""
+        self._put((_Item.MESSAGE, ((topic, data, log_time, publish_time, sequence),), False))
 
     def attach(self, name: str, data: bytes, log_time: int,
                media_type: str = 'application/yaml') -> None:
@@ -191,7 +256,9 @@ class Recorder:
         with self._wake:
             return {'directory': str(self.directory), 'written': self.written,
                     'pending': len(self._queue), 'dropped': self.dropped, 'lost': self.lost,
-                    'stalled': self.stalled(), 'error': self.error}
+                    'stalled': self.stalled(), 'error': self.error,
+                    'file': str(self._writer.path), 'files': len(self._writer.files),
+                    'removed': self.removed}
 
     def check(self) -> None:
         """Stop the recording if its file was deleted; never waits for a write under way."""
@@ -234,15 +301,69 @@ class Recorder:
 
     def _tally_dropped(self, items) -> None:
         """Count the messages and answers among queued ``items`` as dropped (``_wake`` held)."""
-        self.dropped += sum(1 for item in items if item[0] is _Item.MESSAGE)
+        self.dropped += sum(len(item[1]) for item in items if item[0] is _Item.MESSAGE)
         self.lost += sum(1 for item in items if item[0] is _Item.FLUSH and item[1])
+
+    # -------------------------------------------------------------- splitting (lock held)
+
+    def _write_group(self, messages: Sequence[Message], group: bool = True) -> None:
+        """Write ``messages``; a group first starts a new file when the current one is due."""
+        if group and messages and self._groups and self._due(messages):
+            self._split(min(message[2] for message in messages))
+        for message in messages:
+            self._writer.write(*message)
+        self._groups += group and bool(messages)
+
+    def _due(self, messages: Sequence[Message]) -> bool:
+        limits = self._limits()
+        if limits.max_bag_duration > 0 and \
+                self._clock() - self._opened >= limits.max_bag_duration * 1e9:
+            return True
+        return limits.max_bag_size > 0 and limits.max_bag_size < \
+            self._writer.projected_size(len(message[1]) for message in messages)
+
+    def _split(self, since: int) -> None:
+        limits = self._limits()
+        finished, name = self._writer.finish_file(), self._writer.path
+        size = finished.tell()
+        if limits.max_bag_size and size > limits.max_bag_size:
+            logger.warning('%s: %d bytes, over recording.max_bag_size (%d): its first query '
+                           'alone did not fit', name, size, limits.max_bag_size)
+        touched = self._prune(limits, room=limits.keep - 1)
+        self._writer.next_file()
+        self._begin_file(since)
+        with self._wake:
+            self._chores.append((finished, touched))
+            self._wake.notify()
+
+    def _begin_file(self, since: Optional[int]) -> None:
+        """Write the preamble into the new current file and hand it to the system."""
+        self._opened, self._groups = self._clock(), 0
+        preamble = self._preamble(since) if self._preamble is not None else Preamble()
+        for attachment in preamble.attachments:
+            self._writer.attach(*attachment)
+        for name, values in preamble.metadata:
+            self._writer.metadata(name, values)
+        for message in preamble.messages:
+            self._writer.write(*message)
+        self._writer.flush()
+
+    def _prune(self, limits: Limits, room: Optional[int] = None,
+               protect: Optional[Path] = None) -> Tuple[Path, ...]:
+        """Apply ``keep``; return the older bags whose ``metadata.yaml`` must be rewritten."""
+        if limits.keep <= 0:
+            return ()
+        removed = retention.prune(self.directory, limits.keep if room is None else room,
+                                  protect)
+        self.removed += len(removed)
+        return tuple(retention.touched_bags(removed, self.directory))
 
     # -------------------------------------------------------------- the thread
 
     def _run(self) -> None:
         while True:
             with self._wake:
-                while not self._queue and not self._sync_wanted and not self._closing:
+                while not (self._queue or self._sync_wanted or self._closing or self._chores):
                     self._wake.wait()
                 closing = self._closing
                 sync, self._sync_wanted = self._sync_wanted, False
@@ -251,9 +372,12 @@ class Recorder:
                     if self.error:
                         return
                     sync = self._drain() or sync
-                    if closing:
-                        self._writer.close()
-                        return
+                self._do_chores()
+                if closing:
+                    with self._lock:
+                        if not self.error:
+                            self._writer.close()
+                    return
                 if sync:
                     self._sync_began = time.monotonic()
                     self._writer.sync()  # outside the lock: writes may go on meanwhile
@@ -261,6 +385,25 @@ class Recorder:
             except Exception as exc:  # noqa: B902 - any failure stops the recording only
                 self._fail(exc)
                 return
+
+    def _do_chores(self) -> None:
+        """Sync and close finished files; rewrite the metadata of pruned older bags."""
+        while True:
+            with self._wake:
+                if not self._chores:
+                    return
+                finished, touched = self._chores.popleft()
+            if finished is not None:
+                self._sync_began = time.monotonic()
+                try:
+                    sync_and_close(finished)  # a failure stops the recording, as any write's
+                finally:
+                    self._sync_began = None
+            for bag in touched:
+                try:
+                    retention.rewrite_metadata(bag)
+                except Exception as exc:  # noqa: B902 - that bag is only less readable
+                    logger.warning('retention: %s/metadata.yaml not rewritten: %s', bag, exc)
 
     def _drain(self) -> bool:
         """Write every queued item (the writer lock held); return True after a flush."""
@@ -274,7 +417,7 @@ class Recorder:
             for done, item in enumerate(items, 1):
                 kind = item[0]
                 if kind is _Item.MESSAGE:
-                    self._writer.write(*item[1:])
+                    self._write_group(*item[1:])
                 elif kind is _Item.FLUSH:
                     self._writer.flush()
                     flushed = True
@@ -293,7 +436,7 @@ class Recorder:
     def _confirm(self, items, checked: int, done: int) -> int:
         """Count ``items[checked:done]`` written once the file is still there; return done."""
         self._check()
-        self._count_written(sum(1 for item in items[checked:done]
+        self._count_written(sum(len(item[1]) for item in items[checked:done]
                                 if item[0] is _Item.MESSAGE))
         return done
 
@@ -306,7 +449,14 @@ class Recorder:
             self.error = message
             self._tally_dropped(self._queue)
             self._queue.clear()
+            chores, self._chores = list(self._chores), deque()
             self._wake.notify()
+        for finished, _ in chores:  # finished, not yet synced: close them all the same
+            try:
+                if finished is not None:
+                    finished.close()
+            except OSError:
+                pass
         self._writer.abandon()
         logger.error(message)
         if self._on_error is not None:

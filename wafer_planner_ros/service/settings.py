@@ -27,6 +27,13 @@ class Parameter(NamedTuple):
     high: Optional[float] = None
 
 
+MIB = 1 << 20
+MIN_BAG_SIZE = MIB
+"""Bytes: room for what every file begins with (the roadmap markers take 0.16 MB)."""
+MAX_BAG_SIZE = 1 << 50
+MIN_BAG_DURATION = 1.0
+MAX_BAG_DURATION = 10 * 365 * 86400.0
+
 PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('cell_file', '',
               'cell YAML file (see the README, "The cell file"); empty: the packaged '
@@ -52,6 +59,18 @@ PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('recording.enabled', True, 'record every query to MCAP'),
     Parameter('recording.directory', '~/.ros/wafer_planner/recordings',
               'where the recordings are written'),
+    Parameter('recording.max_bag_size', 100 * MIB,
+              'bytes a recording file may take before the next file is started (a query is '
+              f'never split across files); 0: no split by size, else at least {MIN_BAG_SIZE}',
+              0, MAX_BAG_SIZE),
+    Parameter('recording.max_bag_duration', 86400.0,
+              'seconds after which a recording file takes no more queries (the next one is '
+              f'started); 0: no split by time, else at least {MIN_BAG_DURATION:g}',
+              0.0, MAX_BAG_DURATION),
+    Parameter('recording.keep', 100,
+              'recording files (of every recording of this node in recording.directory) '
+              'kept, the oldest removed first, never the one being written; 0: all',
+              0, 1000000),
     Parameter('markers.frame_id', 'efem', 'frame of the published markers'),
     Parameter('live.port', 0,
               'TCP port of the Foxglove WebSocket live view (needs foxglove-sdk); 0: off',
@@ -80,6 +99,12 @@ class NodeSettings:
     max_queue: int
     recording_enabled: bool
     recording_directory: Path
+    recording_max_bag_size: int
+    """Bytes; 0: no split by size."""
+    recording_max_bag_duration: float
+    """Seconds; 0: no split by time."""
+    recording_keep: int
+    """Files kept; 0: all."""
     frame_id: str
     live_port: int
     """TCP port of the Foxglove live view; 0: off."""
@@ -102,6 +127,12 @@ def check(name: str, value) -> None:
         raise ValueError(f'{name} must be in [{spec.low}, {spec.high}], got {value!r}')
     if name in ('markers.frame_id', 'recording.directory', 'live.host') and not value.strip():
         raise ValueError(f'{name} must not be empty')
+    if name == 'recording.max_bag_size' and 0 < value < MIN_BAG_SIZE:
+        raise ValueError(f'{name} must be 0 (no split) or at least {MIN_BAG_SIZE}, '
+                         f'got {value!r}')
+    if name == 'recording.max_bag_duration' and 0 < value < MIN_BAG_DURATION:
+        raise ValueError(f'{name} must be 0 (no split) or at least {MIN_BAG_DURATION}, '
+                         f'got {value!r}')
 
 
 def settings_from(values: Mapping[str, Any]) -> NodeSettings:
@@ -123,5 +154,8 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         max_queue=merged['planning.max_queue'],
         recording_enabled=merged['recording.enabled'],
         recording_directory=Path(merged['recording.directory']).expanduser(),
+        recording_max_bag_size=merged['recording.max_bag_size'],
+        recording_max_bag_duration=float(merged['recording.max_bag_duration']),
+        recording_keep=merged['recording.keep'],
         frame_id=merged['markers.frame_id'],
         live_port=merged['live.port'], live_host=merged['live.host'].strip())
