@@ -6,6 +6,7 @@ from pathlib import Path
 import sys
 
 from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.cli import summary
 from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_FAILURE, EXIT_OK
 from wafer_planner_ros.cli.common import load_cell, Progress, roadmap_for, run, UsageError
 from wafer_planner_ros.cli.common import write_json
@@ -136,17 +137,16 @@ def _summary(row: dict) -> str:
     if row['status'] != 'ok':
         return f"{row['from']} -> {row['to']}: {row['code']}: {row['message']}"
     m = row['metrics']
-    ratios = ', '.join(f'{k} {v:.3f}' for k, v in m['limit_ratios'].items())
-    return (f"{row['from']} -> {row['to']}: ok, cycle time {row['cycle_time']:.3f} s "
-            f"(λ-scaled {row['initial_cycle_time']:.3f} s), elbow branches {m['branches']}\n"
+    return (f"{row['from']} -> {row['to']}: ok, "
+            f"{summary.cycle_text(row['cycle_time'], row['initial_cycle_time'])}, "
+            f"{summary.branches_text(m['branches'])}\n"
             f"  path {m['path_vertices']} vertices ({m['roadmap_path_vertices']} in the "
             f"roadmap), joint length {m['joint_path_length']:.2f} rad, wafer travel "
-            f"{m['wafer_path_length']:.3f} m, min clearance {m['min_clearance'] * 1000:.1f} mm\n"
-            f'  limit ratios: {ratios}\n'
-            f"  peak jerk {', '.join(f'{v:.0f}' for v in m['peak_jerk'])} rad/s³ (joints), "
-            f"wafer {m['peak_wafer_jerk']:.1f} m/s³; "
-            + ('proven collision-free' if m['certified'] else 'NOT proven collision-free')
-            + f" ({m['proof_pieces']} pieces, depth {m['proof_depth']})\n"
+            f"{m['wafer_path_length']:.3f} m, {summary.clearance_text(m['min_clearance'])}\n"
+            f"  {summary.ratios_text(m['limit_ratios'])}\n"
+            f"  {summary.jerk_text(m['peak_jerk'], m['peak_wafer_jerk'])}; "
+            f"{summary.proof_text(m['certified'])} ({m['proof_pieces']} pieces, depth "
+            f"{m['proof_depth']})\n"
             f"  planning {row['timings_ms']['total']:.1f} ms: "
             + ', '.join(f'{k} {v:.1f}' for k, v in row['timings_ms'].items() if k != 'total'))
 

@@ -1,18 +1,16 @@
 """
-``wafer-plan-client FROM TO``: ask a running wafer_planner node for one plan (SPEC section 4).
+Talking to a running planner node: finding it, waiting until it is ready, asking it.
 
-FROM/TO are station names or ``q1,q2,q3``. The client waits until the node reports ready
-(``~/get_status``), sends the request to ``~/plan_station_request`` and prints the
-``~/result`` with the request's id (and the trajectory's size). Exit 0 when
-the plan is ok, 1 when the node answered with an error or did not answer in time, 2 on a
-bad command line.
+``PlannerPeer`` is what ``wafer-plan-client`` (``ask_planner``) and ``wafer-replay
+--publish`` share: the node's answers in order, and ``wait_ready``, which raises
+``NoPlannerNode`` when discovery has not found the node within ``DISCOVERY`` seconds (a
+node that is there but still loading is waited for, up to the caller's deadline).
 """
 
-import argparse
 import json
 import os
-import sys
 import time
+from typing import Callable, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import rclpy
@@ -21,48 +19,22 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.node.planner_node import RELIABLE
-from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
+
+DISCOVERY = 3.0
+"""s within which a running node is found on the same domain (about 0.1 s on loopback)."""
 
 
-def main(argv=None) -> int:
-    """Send the request, wait for its result, print it."""
-    parser = argparse.ArgumentParser(prog='wafer-plan-client', description=__doc__.split('\n')[1])
-    parser.add_argument('start', metavar='FROM', help='station name or q1,q2,q3')
-    parser.add_argument('goal', metavar='TO', help='station name or q1,q2,q3')
-    parser.add_argument('--id', help='request id (default: client-<pid>-<time>)')
-    parser.add_argument('--timeout', type=float, default=30.0,
-                        help='seconds to wait for the node (a first run compiles for ~10 s) '
-                             'and its answer (default: 30)')
-    parser.add_argument('--node', default='/wafer_planner',
-                        help='the planner node (default: /wafer_planner)')
-    args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
-    try:
-        ends = [end_of_text(args.start), end_of_text(args.goal)]
-    except ValueError as exc:
-        parser.error(str(exc))
-    request_id = args.id or f'client-{os.getpid()}-{int(time.time() * 1000)}'
-    rclpy.init()
-    try:
-        client = _Client(args.node)
-        answer = client.ask({'id': request_id, 'from': ends[0], 'to': ends[1]}, args.timeout)
-        client.destroy_node()
-    except KeyboardInterrupt:
-        answer = None
-    finally:
-        rclpy.try_shutdown()
-    if answer is None:
-        print(f'{request_id}: no answer from {args.node} within {args.timeout:g} s',
-              file=sys.stderr)
-        return 1
-    status, trajectory = answer
-    values = {kv.key: kv.value for kv in status.values}
-    print(f'{request_id}: {status.message}')
-    for key, value in values.items():
-        print(f'  {key}: {value}')
-    if trajectory is not None:
-        print(f'  trajectory: {len(trajectory.points)} points')
-    return 0 if status.level in (DiagnosticStatus.OK, DiagnosticStatus.WARN) else 1
+class NoPlannerNode(WaferPlannerError):
+    """No node of that name was found."""
+
+    def __init__(self, planner: str):
+        """Say which node, and what to check."""
+        super().__init__(
+            f'no node {planner} found within {DISCOVERY:g} s (is it running, with the same '
+            f"ROS_DOMAIN_ID ({os.environ.get('ROS_DOMAIN_ID', '0')} here) and "
+            'ROS_AUTOMATIC_DISCOVERY_RANGE?)')
 
 
 class PlannerPeer(Node):
@@ -77,14 +49,30 @@ class PlannerPeer(Node):
                                  RELIABLE)
         self.status = self.create_client(Trigger, f'{planner}/get_status')
 
-    def wait_ready(self, deadline: float, publishers) -> bool:
-        """Spin until the planner is ready and hears ``publishers``; False after ``deadline``."""
-        while not self._ready() or any(p.get_subscription_count() == 0 for p in publishers) \
-                or self.count_publishers(f'{self.planner}/result') == 0:
+    def wait_ready(self, deadline: float, publishers,
+                   say: Callable[[str], None] = lambda text: None) -> bool:
+        """
+        Spin until the planner is ready and hears ``publishers``; False after ``deadline``.
+
+        Raise ``NoPlannerNode`` when it is not found within ``DISCOVERY`` seconds; ``say``
+        is told once what a node that is found but not ready is doing.
+        """
+        found_by = time.monotonic() + DISCOVERY
+        told = False
+        while True:
+            status = self.planner_status()
+            if status.get('ready') and all(p.get_subscription_count() for p in publishers) \
+                    and self.count_publishers(f'{self.planner}/result'):
+                return True
+            if not status and time.monotonic() > found_by and not self._found():
+                raise NoPlannerNode(self.planner)
+            if status and not status.get('ready') and not told:
+                say(f"waiting for {self.planner}: {status.get('busy_with') or 'not ready'} "
+                    f"({status.get('last_rebuild_error') or 'loading the roadmap'})")
+                told = True
             if time.monotonic() > deadline:
                 return False
             rclpy.spin_once(self, timeout_sec=0.1)
-        return True
 
     def planner_status(self) -> dict:
         """Return the planner's ``~/get_status`` ({} when it does not answer in 2 s)."""
@@ -97,9 +85,31 @@ class PlannerPeer(Node):
         except ValueError:
             return {}
 
-    def _ready(self) -> bool:
-        """Return whether the planner answers ``~/get_status`` with ready."""
-        return bool(self.planner_status().get('ready'))
+    def _found(self) -> bool:
+        """Return whether discovery knows a node of the planner's name."""
+        return any(f"{namespace.rstrip('/')}/{name}" == self.planner
+                   for name, namespace in self.get_node_names_and_namespaces())
+
+
+def ask_planner(planner: str, request: dict, timeout: float,
+                say: Callable[[str], None] = lambda text: None) -> Optional[tuple]:
+    """
+    Return (result, trajectory or None) of a station request to ``planner``.
+
+    None when no answer came within ``timeout`` seconds (or on Ctrl-C); raise
+    ``NoPlannerNode`` when the node is not found.
+    """
+    rclpy.init()
+    try:
+        client = _Client(planner)
+        try:
+            return client.ask(request, timeout, say)
+        finally:
+            client.destroy_node()
+    except KeyboardInterrupt:
+        return None
+    finally:
+        rclpy.try_shutdown()
 
 
 class _Client(PlannerPeer):
@@ -112,10 +122,10 @@ class _Client(PlannerPeer):
         self.requests = self.create_publisher(String, f'{planner}/plan_station_request',
                                               RELIABLE)
 
-    def ask(self, request: dict, timeout: float):
+    def ask(self, request: dict, timeout: float, say: Callable[[str], None] = lambda t: None):
         """Return (result, trajectory or None) for the request, or None after ``timeout``."""
         deadline = time.monotonic() + timeout
-        if not self.wait_ready(deadline, [self.requests]):
+        if not self.wait_ready(deadline, [self.requests], say):
             return None
         self.requests.publish(String(data=json.dumps(request)))
         rid = request['id']
@@ -130,12 +140,3 @@ class _Client(PlannerPeer):
 
     def _answer(self, request_id: str):
         return next((m for m in self.answers if m.name == request_id), None)
-
-
-def entry_point() -> None:
-    """Console script ``wafer-plan-client``."""
-    raise SystemExit(main())
-
-
-if __name__ == '__main__':
-    entry_point()

@@ -42,7 +42,7 @@ def plan_answer(result, request, roadmap, joint_names: Sequence[str], stamp,
                 node_ms: float) -> tuple:
     """Return a successful plan's (JointTrajectory, ``~/result`` status), serialised."""
     message = '; '.join(result.warnings) or (
-        f'ok: {result.start.label} -> {result.goal.label} in {result.cycle_time:.3f} s')
+        f'ok: {result.start.label} -> {result.goal.label}, cycle time {result.cycle_time:.3f} s')
     values = dict(plan_values(result, roadmap, request.start, request.goal), node_ms=node_ms)
     return (trajectory(result, request.request_id, joint_names, stamp),
             result_status(request.request_id, 'warn' if result.warnings else 'ok', message,

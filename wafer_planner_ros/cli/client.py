@@ -1,0 +1,118 @@
+"""
+``wafer-plan-client FROM TO``: ask a running wafer_planner node for one plan.
+
+FROM/TO are station names or ``q1,q2,q3`` (radians; a first angle may be negative). The
+client finds the node (``--node``, default ``/wafer_planner``), waits until it reports
+ready (``~/get_status``), sends the request to ``~/plan_station_request`` and prints the
+``~/result`` worded as ``wafer-plan`` words a plan (``--raw``: every value as sent), and
+the trajectory's size. Exit 0 when the plan is ok; 1 when the node answered with an error,
+did not answer within ``--timeout``, or was not found within ``DISCOVERY`` seconds; 2 on a
+bad command line.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from wafer_planner_ros.cli import summary
+from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, run
+from wafer_planner_ros.node.client import ask_planner
+from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
+
+
+def main(argv=None) -> int:
+    """Send the request, wait for its result, print it."""
+    parser = argparse.ArgumentParser(prog='wafer-plan-client',
+                                     description=__doc__.split('\n')[1])
+    parser.add_argument('start', metavar='FROM', help='station name or q1,q2,q3 (rad)')
+    parser.add_argument('goal', metavar='TO', help='station name or q1,q2,q3 (rad)')
+    parser.add_argument('--id', help='request id (default: client-<pid>-<ms since 1970>)')
+    parser.add_argument('--timeout', type=float, default=30.0,
+                        help='seconds to wait for the node to be ready (the first start after '
+                             'an install compiles for about 20 s) and for its answer '
+                             '(default: 30)')
+    parser.add_argument('--node', default='/wafer_planner',
+                        help='the planner node (default: /wafer_planner)')
+    parser.add_argument('--raw', action='store_true',
+                        help="print every value of the node's result as it was sent")
+    args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
+    try:
+        ends = [end_of_text(args.start), end_of_text(args.goal)]
+    except ValueError as exc:
+        parser.error(str(exc))
+    node = args.node if args.node.startswith('/') else f'/{args.node}'
+    request_id = args.id or f'client-{os.getpid()}-{int(time.time() * 1000)}'
+    answer = ask_planner(node, {'id': request_id, 'from': ends[0], 'to': ends[1]},
+                         args.timeout, lambda text: print(text, file=sys.stderr))
+    if answer is None:
+        print(f'{request_id}: no answer from {node} within {args.timeout:g} s',
+              file=sys.stderr)
+        return EXIT_FAILURE
+    status, trajectory = answer
+    values = {kv.key: kv.value for kv in status.values}
+    print(f'{request_id}: {status.message}')
+    lines = [f'{k}: {v}' for k, v in values.items()] if args.raw else described(values)
+    for line in lines:
+        print(f'  {line}')
+    if trajectory is not None:
+        print(f'  trajectory: {len(trajectory.points)} points, '
+              f'{len(trajectory.joint_names)} joints')
+    return EXIT_OK if values.get('code') == 'OK' else EXIT_FAILURE
+
+
+def described(values: dict) -> list:
+    """Return the lines that word a result's values (those it has), as ``wafer-plan`` does."""
+    lines = []
+    number = _numbers(values)
+    if 'cycle_time' in number:
+        method = values.get('method', '')
+        line = summary.cycle_text(number['cycle_time'], number.get('initial_cycle_time'))
+        if 'branches' in values:
+            line += f", {summary.branches_text(json.loads(values['branches']))}"
+        line += f" ({method or 'planned'}, {_source(values.get('source', ''))})"
+        lines.append(line)
+    if 'min_clearance' in number:
+        ratios = {k[len('ratio_'):]: v for k, v in number.items() if k.startswith('ratio_')}
+        lines.append(f"{summary.clearance_text(number['min_clearance'])}; "
+                     f'{summary.ratios_text(ratios)}')
+    if 'peak_jerk' in values and 'peak_wafer_jerk' in number:
+        jerk = summary.jerk_text(json.loads(values['peak_jerk']), number['peak_wafer_jerk'])
+        lines.append(f"{jerk}; {summary.proof_text(values.get('certified') == 'True')}")
+    timing = []
+    if 'planning_time_ms' in number:
+        timing.append(f"planning {number['planning_time_ms']:.1f} ms")
+    if 'node_ms' in number:
+        timing.append(f"answered {number['node_ms']:.1f} ms after receipt")
+    if values.get('roadmap_hash'):
+        timing.append(f"roadmap {values['roadmap_hash'][:12]}, seed {values.get('seed', '?')}")
+    if timing:
+        lines.append('; '.join(timing))
+    if values.get('code', 'OK') != 'OK':
+        lines.insert(0, f"code {values['code']}")
+    return lines
+
+
+def _numbers(values: dict) -> dict:
+    number = {}
+    for key, text in values.items():
+        try:
+            number[key] = float(text)
+        except ValueError:
+            pass
+    return number
+
+
+def _source(source: str) -> str:
+    return {'table': 'from the station table', 'planned': 'planned for this request'}.get(
+        source, source or 'planned for this request')
+
+
+def entry_point() -> int:
+    """Console script ``wafer-plan-client``."""
+    return run(main)
+
+
+if __name__ == '__main__':
+    raise SystemExit(entry_point())
