@@ -57,7 +57,8 @@ class Peer:
         wait_for(lambda: self.joint_pub.get_subscription_count() > 0
                  and self.station_pub.get_subscription_count() > 0
                  and all(c.service_is_ready() for c in self.clients.values()), 20.0)
-        wait_for(lambda: self.status()['ready'] and self.status()['busy_with'] != 'load', 120.0)
+        wait_for(lambda: self.status()['ready']
+                 and self.status()['busy_with'] not in ('load', 'kernels'), 120.0)
 
     def subscribe_markers(self) -> list:
         """Subscribe to the roadmap markers now (a late subscriber); return the inbox."""

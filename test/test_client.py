@@ -37,3 +37,13 @@ def test_an_error_result_names_its_code_and_only_what_it_has():
               'to': 'loadlock1'}
     assert described(values) == [
         'code START_IN_COLLISION', 'planning 1.2 ms; roadmap abcdef012345, seed 3']
+
+
+def test_values_that_are_not_what_the_node_sends_are_worded_without_failing():
+    values = dict(OK_VALUES, branches='garbage', peak_jerk='[oops', cycle_time='nan',
+                  min_clearance='inf', ratio_velocity='x')
+    lines = described(values)
+    assert not any(line.startswith(('cycle time', 'min clearance', 'peak jerk'))
+                   for line in lines), lines
+    assert lines == ['planning 0.8 ms; answered 4.5 ms after receipt; roadmap 9f679c05e750, '
+                     'seed 0']

@@ -5,13 +5,14 @@ import os
 from pathlib import Path
 import subprocess
 import sys
+import time
 
 import numpy as np
 
 from wafer_planner_ros import kernels
 from wafer_planner_ros.geometry import clearance
 from wafer_planner_ros.kernels import kernel, objmode
-from wafer_planner_ros.node import serving
+from wafer_planner_ros.node import startup
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 
@@ -84,16 +85,19 @@ def test_kernels_being_compiled_are_announced_with_progress(monkeypatch, caplog)
     def fresh(x):
         return np.sin(x) * np.cos(x) + x ** 3
 
-    monkeypatch.setattr(serving, 'ANNOUNCE_AFTER', 0.0)
-    monkeypatch.setattr(serving, 'ANNOUNCE_EVERY', 0.01)
+    monkeypatch.setattr(startup, 'ANNOUNCE_AFTER', 0.0)
+    monkeypatch.setattr(startup, 'ANNOUNCE_EVERY', 0.01)
     logger = logging.getLogger('test_kernels')
     with caplog.at_level(logging.INFO, logger='test_kernels'):
-        with serving.kernels_announced(logger):
+        with startup.kernels_announced(logger):
             assert fresh(0.5) == np.sin(0.5) * np.cos(0.5) + 0.125
-        with serving.kernels_announced(logger):
+            time.sleep(0.2)  # the rest of the loading, while progress is logged
+        with startup.kernels_announced(logger):
             fresh(0.25)  # compiled already: only loaded
     lines = [r.getMessage() for r in caplog.records]
     assert any(line.startswith('compiling the planning kernels for this machine')
+               for line in lines), lines
+    assert any(line.startswith('compiling the planning kernels: 1 compiled so far, ')
                for line in lines), lines
     assert any(line.startswith('planning kernels compiled: 1 in ') for line in lines), lines
     assert lines[-1].startswith('planning kernels loaded in ')

@@ -65,9 +65,11 @@ class Kernel:
     @property
     def compiled(self):
         """Return the numba dispatcher (made, not yet compiled, on first use)."""
+        if self._compiled is not None:
+            return self._compiled
+        import numba  # outside the lock: Python's import lock serialises the import
         with _LOCK:
             if self._compiled is None:
-                import numba
                 function = _rebound(self.function, lambda k: k.compiled, numba.objmode)
                 self._compiled = numba.njit(**self.options)(function)
             return self._compiled
@@ -75,6 +77,8 @@ class Kernel:
     @property
     def interpreted(self) -> Callable:
         """Return the function as plain Python, calling the other kernels interpreted."""
+        if self._interpreted is not None:
+            return self._interpreted
         with _LOCK:
             if self._interpreted is None:
                 self._interpreted = _rebound(self.function, lambda k: k.interpreted, objmode)
@@ -83,7 +87,7 @@ class Kernel:
     def compiled_count(self) -> int:
         """Return how many signatures of this kernel were compiled, not loaded from cache."""
         compiled = self._compiled
-        return 0 if compiled is None else sum(compiled.stats.cache_misses.values())
+        return 0 if compiled is None else sum(list(compiled.stats.cache_misses.values()))
 
 
 def kernel(function: Callable = None, **options):
@@ -118,6 +122,17 @@ def compiled_count() -> int:
     with _LOCK:
         kernels = list(_KERNELS)
     return sum(k.compiled_count() for k in kernels)
+
+
+def cache_directory() -> str:
+    """Return where numba keeps the compiled kernels ('' before any is made)."""
+    with _LOCK:
+        made = [k._compiled for k in _KERNELS if k._compiled is not None]
+    for dispatcher in made:
+        path = dispatcher.stats.cache_path
+        if path:
+            return str(path)
+    return ''
 
 
 def _rebound(function: Callable, form: Callable[[Kernel], Callable], mode) -> Callable:

@@ -65,25 +65,26 @@ def main(argv=None) -> int:
 def described(values: dict) -> list:
     """Return the lines that word a result's values (those it has), as ``wafer-plan`` does."""
     lines = []
-    number = _numbers(values)
-    if 'cycle_time' in number:
-        method = values.get('method', '')
+    number = {key: summary.number(text) for key, text in values.items()}
+    if number.get('cycle_time') is not None:
         line = summary.cycle_text(number['cycle_time'], number.get('initial_cycle_time'))
         if 'branches' in values:
-            line += f", {summary.branches_text(json.loads(values['branches']))}"
-        line += f" ({method or 'planned'}, {_source(values.get('source', ''))})"
+            line += f", {summary.branches_text(summary.branches(values['branches']))}"
+        line += f" ({values.get('method') or 'planned'}, {_source(values.get('source', ''))})"
         lines.append(line)
-    if 'min_clearance' in number:
-        ratios = {k[len('ratio_'):]: v for k, v in number.items() if k.startswith('ratio_')}
+    if number.get('min_clearance') is not None:
+        ratios = {k[len('ratio_'):]: v for k, v in number.items()
+                  if k.startswith('ratio_') and v is not None}
         lines.append(f"{summary.clearance_text(number['min_clearance'])}; "
                      f'{summary.ratios_text(ratios)}')
-    if 'peak_jerk' in values and 'peak_wafer_jerk' in number:
-        jerk = summary.jerk_text(json.loads(values['peak_jerk']), number['peak_wafer_jerk'])
-        lines.append(f"{jerk}; {summary.proof_text(values.get('certified') == 'True')}")
+    jerk = _numbers(values.get('peak_jerk'))
+    if jerk and number.get('peak_wafer_jerk') is not None:
+        lines.append(f"{summary.jerk_text(jerk, number['peak_wafer_jerk'])}; "
+                     f"{summary.proof_text(values.get('certified') == 'True')}")
     timing = []
-    if 'planning_time_ms' in number:
+    if number.get('planning_time_ms') is not None:
         timing.append(f"planning {number['planning_time_ms']:.1f} ms")
-    if 'node_ms' in number:
+    if number.get('node_ms') is not None:
         timing.append(f"answered {number['node_ms']:.1f} ms after receipt")
     if values.get('roadmap_hash'):
         timing.append(f"roadmap {values['roadmap_hash'][:12]}, seed {values.get('seed', '?')}")
@@ -94,14 +95,14 @@ def described(values: dict) -> list:
     return lines
 
 
-def _numbers(values: dict) -> dict:
-    number = {}
-    for key, text in values.items():
-        try:
-            number[key] = float(text)
-        except ValueError:
-            pass
-    return number
+def _numbers(text) -> list:
+    """Return a list of numbers sent as JSON ([] when it is not one)."""
+    try:
+        found = json.loads(text)
+    except (TypeError, ValueError):
+        return []
+    ok = isinstance(found, list) and all(summary.number(v) is not None for v in found)
+    return [float(v) for v in found] if ok else []
 
 
 def _source(source: str) -> str:

@@ -16,15 +16,15 @@ roadmap load.
 """
 
 import argparse
-import json
 import math
 from pathlib import Path
 import sys
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional
 
 import numpy as np
 from PIL import Image
 from wafer_planner_ros.cell.model import Cell
+from wafer_planner_ros.cli import summary
 from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, recorded_queries, run
 from wafer_planner_ros.cli.common import UsageError
 from wafer_planner_ros.cli.review_index import (asked, DEFAULT_FLAG_CLEARANCE,
@@ -73,15 +73,17 @@ def title(query: Query, cell: Cell) -> str:
     result = query.result
     values = result.values if result is not None else {}
     lines = [f'#{query.number} {request_id}: '
-             + motion_label(start or '?', goal or '?', _branches(values.get('branches', '')))
+             + motion_label(start or '?', goal or '?',
+                            summary.branches(values.get('branches', '')))
              + f', received {received(query)[0]}']
     if result is None:
         lines.append('no answer recorded')
         return '\n'.join(lines)
     if query.cycle_time is not None:
-        lines.append(f'{query.code}: cycle time {query.cycle_time:.3f} s (λ-scaled '
-                     f'{number_text(values.get("initial_cycle_time"), "{:.3f}")} s), planning '
-                     f'{number_text(values.get("planning_time_ms"), "{:.0f}")} ms')
+        lines.append(f'{query.code}: '
+                     + summary.cycle_text(query.cycle_time,
+                                          summary.number(values.get('initial_cycle_time')))
+                     + f', planning {number_text(values.get("planning_time_ms"), "{:.0f}")} ms')
     if result.level != 0 or query.cycle_time is None:
         message = printable(result.message)
         code = query.code
@@ -127,17 +129,6 @@ def _configuration(label: str, cell: Cell) -> Optional[np.ndarray]:
     """Return the finite configuration a label names, None if it names none."""
     q = label_configuration(label, cell)
     return q if q is not None and bool(np.all(np.isfinite(q))) else None
-
-
-def _branches(text: str) -> Tuple[Optional[int], Optional[int]]:
-    """Return the recorded (start, goal) elbow branches: +1, -1 or None (joints, unknown)."""
-    try:
-        branches = json.loads(text)
-    except ValueError:
-        return None, None
-    if not isinstance(branches, list) or len(branches) != 2:
-        return None, None
-    return tuple(b if b in (1, -1) and not isinstance(b, bool) else None for b in branches)
 
 
 def _progress(done: int, total: int, stream=None) -> None:

@@ -12,10 +12,10 @@ from collections import Counter
 from dataclasses import dataclass
 from datetime import datetime, timezone
 import html
-import math
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Tuple
 
 from wafer_planner_ros.cell.model import Cell
+from wafer_planner_ros.cli import summary
 from wafer_planner_ros.recording.queries import Query, short_label
 from wafer_planner_ros.service.requests import end_label, request_of, RequestError
 
@@ -71,12 +71,12 @@ def flags(query: Query, thresholds: Thresholds) -> List[str]:
     """Return why the query is flagged, e.g. 'clearance 0.3 mm < 1.0 mm' (none: [])."""
     values = query.result.values if query.result is not None else {}
     found = []
-    clearance = _float(values.get('min_clearance'))
+    clearance = summary.number(values.get('min_clearance'))
     if thresholds.clearance_mm > 0.0 and clearance is not None and (
             clearance * 1000.0 < thresholds.clearance_mm):
         found.append(f'clearance {clearance * 1000.0:.2f} mm < '
                      f'{thresholds.clearance_mm:g} mm')
-    planning = _float(values.get('planning_time_ms'))
+    planning = summary.number(values.get('planning_time_ms'))
     if thresholds.planning_ms > 0.0 and planning is not None and (
             planning > thresholds.planning_ms):
         found.append(f'planning {planning:.1f} ms > {thresholds.planning_ms:g} ms')
@@ -211,15 +211,6 @@ def _flag_summary(found: List[Query], flagged: Dict[int, List[str]],
     return (f'<div class="flags"><p><strong>{len(listed)} flagged</strong> '
             f'({esc(", ".join(rules))})'
             + (':</p><ul>' + ''.join(listed) + '</ul>' if listed else '.</p>') + '</div>')
-
-
-def _float(text) -> Optional[float]:
-    """Return a recorded value as a finite float, None when it is missing or not one."""
-    try:
-        value = float(text)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
 
 
 def number_text(text, form: str, scale: float = 1.0) -> str:

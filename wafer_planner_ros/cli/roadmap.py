@@ -5,6 +5,7 @@ import sys
 
 from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_OK, load_cell, roadmap_for
 from wafer_planner_ros.cli.common import run, UsageError, write_json
+from wafer_planner_ros.geometry.kinematics import elbow_words
 
 
 def statistics(cell, cached) -> dict:
@@ -52,7 +53,8 @@ def format_statistics(stats: dict) -> str:
         'stations      ' + connected,
     ]
     for name, station in sorted(stats['stations'].items()):
-        lines.append(f"  {name:<12}elbow {station['elbows']} -> nodes {station['nodes']}, "
+        elbows = ', '.join(elbow_words(elbow) for elbow in station['elbows'])
+        lines.append(f"  {name:<12}{elbows} -> nodes {station['nodes']}, "
                      f"component {station['components']}")
     lines.append('samplers      draws   nodes  failed  unused  merges  new  coverage  redundant'
                  '  weight')

@@ -1,11 +1,14 @@
 """
 How the tools word a plan's figures: the same units and rounding everywhere.
 
-``wafer-plan`` words its own result, ``wafer-plan-client`` the values of a node's
-``~/result``; both through these functions, so a figure reads the same in both.
+``wafer-plan`` words its own result, ``wafer-plan-client`` and ``wafer-review`` the values of
+a node's ``~/result`` (strings: ``number`` and ``branches`` read them back, tolerating any
+text); all through these functions, so a figure reads the same in each.
 """
 
-from typing import Mapping, Optional, Sequence
+import json
+import math
+from typing import Mapping, Optional, Sequence, Tuple
 
 from wafer_planner_ros.geometry.kinematics import elbow_words
 
@@ -42,3 +45,23 @@ def jerk_text(peak_jerk: Sequence[float], wafer_jerk: float) -> str:
 def proof_text(certified: bool) -> str:
     """Return whether the curve is proven collision-free, in words."""
     return 'proven collision-free' if certified else 'NOT proven collision-free'
+
+
+def number(text) -> Optional[float]:
+    """Return a result's value as a finite float, None when it is missing or not one."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
+
+
+def branches(text) -> Tuple[Optional[int], Optional[int]]:
+    """Return a result's (start, goal) elbow branches: +1, -1 or None (joints, unknown)."""
+    try:
+        found = json.loads(text)
+    except (TypeError, ValueError):
+        return None, None
+    if not isinstance(found, list) or len(found) != 2:
+        return None, None
+    return tuple(b if b in (1, -1) and not isinstance(b, bool) else None for b in found)

@@ -4,8 +4,11 @@ The planning node ``wafer_planner`` (SPEC section 5): a thin ROS edge around the
 Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
 publishing: every callback is short), the worker's two (``worker``: one plans, one request
 at a time, the other loads or rebuilds the roadmap while the previous one serves; the
-compiled kernels release the GIL) and the recorder's (``node.recording``). Requests are
-recorded, read and checked in the subscription callback, then handed to the worker. The
+compiled kernels release the GIL; at start-up a third says when the kernels are being
+compiled, ``startup``), the recorder's (``node.recording``) and, with ``live.port`` set,
+the Foxglove server's (``live``). Requests are handed to the recording (which writes each
+with its answers, a query whole in one file), read and checked in the subscription
+callback, then handed to the worker. The
 worker hands every answer back through a guard condition, so all publishing happens on the
 executor, each answer recorded before it goes out; each request gets exactly one
 ``~/result``, whatever happens: no request, however malformed, and no failure while
@@ -246,8 +249,12 @@ class WaferPlannerNode(Node):
     @guarded_service
     def _on_rebuild(self, request, response):
         if not self._worker.rebuild():
+            busy = self._worker.status()['busy_with']
             response.success = False
-            response.message = 'a roadmap load or rebuild is already under way'
+            response.message = ('a roadmap load or rebuild is already under way' if busy in
+                                ('load', 'plan', None) else
+                                f'the roadmap is still being made ready (busy_with {busy}): '
+                                'ask again when ~/get_status shows it done')
             return response
         response.success = True
         response.message = ('rebuild started with the current parameters; the current '
@@ -332,6 +339,8 @@ class WaferPlannerNode(Node):
                 level = DiagnosticStatus.WARN
                 message = (f"rebuild failed: {status['last_rebuild_error']}; serving the "
                            f"previous roadmap {status['hash'][:12]}")
+            elif status['busy_with'] == 'kernels':
+                message = 'ready; loading the planning kernels and the station table'
             elif status['busy_with'] == 'station_table':
                 message = 'ready; planning the station table'
             elif status['busy_with'] == 'load':

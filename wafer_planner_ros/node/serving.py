@@ -3,25 +3,19 @@ A roadmap ready to serve: its planner, when it took over, and how it got there.
 
 The worker's loading thread builds or loads a roadmap (``progress_reporter`` logs the
 build) and hands it over as a ``Serving``: from then on the node is ready. Then, while it
-serves, the compiled kernels load (``kernels_announced`` says so when they are compiled
-instead, at the first start after an install, into ``numba_cache``): the cached station
-table (``load_station_table``), which also verifies its entries, then a plan by each
-method (``warm_up``); when the table was not cached, it is planned then
-(``build_station_table``). ``plan_request`` chooses how a request is answered: a station pair
-from the table when it holds it; a station pair it does not hold (yet) by the corridor
-curve, which takes milliseconds; anything else by the whole-curve optimisation within
+serves, the compiled kernels load (``node.startup``): the cached station table
+(``load_station_table``), which also verifies its entries, then a plan by each method
+(``warm_up``); when the table was not cached, it is planned then (``build_station_table``).
+``plan_request`` chooses how a request is answered: a station pair from the table when it
+holds it; a station pair it does not hold (yet) by the corridor curve, which takes
+milliseconds; anything else by the whole-curve optimisation within
 ``planning.optimise_budget`` seconds.
 """
 
-import contextlib
 from dataclasses import dataclass, replace
-import os
-from pathlib import Path
-import threading
 import time
 from typing import Optional
 
-from wafer_planner_ros import kernels
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
@@ -32,10 +26,6 @@ MIN_BUDGET = 0.05
 """s: a budget below this (the request's deadline is near) gets the corridor curve."""
 WARM_UP_BUDGET = 0.05
 """s of whole-curve optimisation in the warm-up: enough to load its kernels."""
-ANNOUNCE_AFTER = 1.0
-"""s after which kernels still being compiled are announced."""
-ANNOUNCE_EVERY = 5.0
-"""s between the progress lines while the kernels are compiled."""
 
 
 @dataclass(frozen=True)
@@ -133,63 +123,3 @@ def warm_up(planner: Planner) -> None:
                     ).plan(names[0], names[-1], budget=budget)
         except (PlanningError, IndexError):
             pass  # a cell whose first and last stations cannot be joined still warms up
-
-
-@contextlib.contextmanager
-def kernels_announced(logger):
-    """
-    Log, while the body runs, that the compiled kernels are being compiled, if they are.
-
-    Loading them from numba's cache takes a fraction of a second; compiling them, at the
-    first start after an install or an upgrade, about 20 s: that is announced after
-    ``ANNOUNCE_AFTER`` seconds, with progress every ``ANNOUNCE_EVERY`` seconds.
-    """
-    done, begun, before = threading.Event(), time.monotonic(), kernels.compiled_count()
-    where = os.environ.get('NUMBA_CACHE_DIR') or "numba's cache beside the package"
-
-    def watch() -> None:
-        announced = False
-        while not done.wait(ANNOUNCE_EVERY if announced else ANNOUNCE_AFTER):
-            compiled = kernels.compiled_count() - before
-            if not compiled:
-                continue
-            if not announced:
-                logger.info('compiling the planning kernels for this machine: the first '
-                            'start after an install or an upgrade takes about 20 s (they '
-                            f'are kept in {where})')
-                announced = True
-                continue
-            logger.info(f'compiling the planning kernels: {compiled} compiled so far, '
-                        f'{time.monotonic() - begun:.0f} s')
-
-    watcher = threading.Thread(target=watch, name='wafer_planner_kernels', daemon=True)
-    watcher.start()
-    try:
-        yield
-    finally:
-        done.set()
-        watcher.join()
-        compiled, seconds = kernels.compiled_count() - before, time.monotonic() - begun
-        if compiled:
-            logger.info(f'planning kernels compiled: {compiled} in {seconds:.1f} s; later '
-                        'starts load them')
-        else:
-            logger.info(f'planning kernels loaded in {seconds:.2f} s')
-
-
-def numba_cache(cache_dir: Optional[Path]) -> None:
-    """Have numba keep its compiled kernels under ``cache_dir`` (before numba is loaded)."""
-    if cache_dir is not None and 'NUMBA_CACHE_DIR' not in os.environ \
-            and not kernels.loaded():
-        os.environ['NUMBA_CACHE_DIR'] = str(Path(cache_dir) / 'numba')
-
-
-def since_process_start() -> str:
-    """Return ', 0.42 s after the process started' (Linux), or '' where that is unknown."""
-    try:
-        with open('/proc/self/stat') as stat:
-            ticks = int(stat.read().rsplit(')', 1)[1].split()[19])
-        age = time.clock_gettime(time.CLOCK_BOOTTIME) - ticks / os.sysconf('SC_CLK_TCK')
-    except (OSError, ValueError, IndexError, AttributeError):
-        return ''
-    return f', {age:.2f} s after the process started'

@@ -6,13 +6,18 @@ The planning thread plans one request at a time. Requests wait in a bounded back
 ``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The loading thread
 loads the roadmap at start-up (requests meanwhile are answered ``ROADMAP_NOT_READY``) and
 rebuilds it on request: the previous roadmap serves until the new one is ready, and keeps
-serving when the rebuild fails (``rebuild_failed`` in the status says why); then it loads or
-plans the station table (``serving.station_table``; a rebuild is refused meanwhile). Each
-request is planned on the roadmap in force when it was received, the one a recording
-pairs it with, and answered as ``serving.plan_request`` chooses.
-The worker never publishes: it hands every message, already serialised, to ``send``, which
-the node publishes from its executor. Every request gets exactly one answer, whatever
-happens: a failure of the node itself is answered ``INTERNAL`` with the reason.
+serving when the rebuild fails (``rebuild_failed`` in the status says why). Once the
+roadmap serves the node is ready, before any compiled kernel is loaded; the loading thread
+then loads the kernels (``busy_with: kernels``): first the cached station table, which a
+station request received meanwhile waits for (up to ``TABLE_WAIT`` of its timeout), then a
+warm-up plan by each method; when no table was cached it plans one (``busy_with:
+station_table``), station pairs getting the corridor curve meanwhile. A rebuild is refused
+until all that is done. Each request is planned on the roadmap in force when it was
+received, the one a recording pairs it with, and answered as ``serving.plan_request``
+chooses. The worker never publishes: it hands every message, already serialised, to
+``send``, which the node publishes from its executor. Every request gets exactly one
+answer, whatever happens: a failure of the node itself is answered ``INTERNAL`` with the
+reason.
 """
 
 from collections import deque
@@ -28,10 +33,9 @@ from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import build_station_table, held_pairs, kernels_announced
-from wafer_planner_ros.node.serving import load_station_table, numba_cache, plan_request
-from wafer_planner_ros.node.serving import progress_reporter, Serving, since_process_start
-from wafer_planner_ros.node.serving import warm_up
+from wafer_planner_ros.node.serving import build_station_table, held_pairs, load_station_table
+from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving, warm_up
+from wafer_planner_ros.node.startup import kernels_announced, numba_cache, since_process_start
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
@@ -56,7 +60,7 @@ class PlanningWorker:
         ``settings`` returns the node's current settings; ``send(*items)`` hands
         (kind, message, query number) items to the executor and never raises; ``stamp``
         returns a ROS time; ``own_process``: the node has the process to itself, so numba
-        keeps its kernels in the cache directory (``serving.numba_cache``).
+        keeps its kernels in the cache directory (``startup.numba_cache``).
         """
         self._own_process = own_process
         self._settings, self._recording, self._send = settings, recording, send
@@ -78,6 +82,8 @@ class PlanningWorker:
         """(loaded_ns of the roadmap it belongs to, the station table)."""
         self._table_phase: Optional[str] = None
         """'loading' the station table from the cache (station requests wait), 'planning' it."""
+        self._warming = False
+        """The kernels are being loaded (or compiled): the cached table, then the warm-up."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
@@ -196,8 +202,9 @@ class PlanningWorker:
             cell = serving.planner.cell if serving is not None else self._loading_cell
             return {
                 'ready': serving is not None,
-                'busy_with': 'station_table' if self._table_phase else 'load' if self._loading
-                else 'plan' if self._planning else None,
+                'busy_with': 'kernels' if self._warming
+                else 'station_table' if self._table_phase == 'planning'
+                else 'load' if self._loading else 'plan' if self._planning else None,
                 'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
                 'edges': roadmap.edge_count if roadmap is not None else 0,
@@ -291,11 +298,11 @@ class PlanningWorker:
             if planner.settings.sample_period != settings.sample_period:
                 planner = Planner(planner.cell, planner.roadmap,
                                   PlannerSettings(sample_period=settings.sample_period))
-            begun = time.monotonic()
             with self.lock:
                 if isinstance(request.start, str) and isinstance(request.goal, str):
                     self._await_table(serving, received + TABLE_WAIT * settings.timeout)
                 loaded_ns, table = self._table
+            begun = time.monotonic()
             table = table if loaded_ns == serving.loaded_ns else None
             try:
                 result = plan_request(planner, table, request, settings,
@@ -407,6 +414,8 @@ class PlanningWorker:
         # the roadmap serves: the cached station table first, which station requests wait
         # for, then a plan of each method; then the table is planned if it was not cached.
         table = None
+        with self.lock:
+            self._warming = True
         with kernels_announced(self._logger):
             try:
                 table = load_station_table(planner, settings, self._logger)
@@ -421,6 +430,9 @@ class PlanningWorker:
                 warm_up(planner)
             except Exception as exc:  # noqa: B902 - the kernels then load with a request
                 self._logger.error(f'warm-up failed: {reason_of(exc)}')
+            finally:
+                with self.lock:
+                    self._warming = False
         if table is not None or not settings.station_table:
             return
         try:
