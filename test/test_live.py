@@ -16,6 +16,7 @@ from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.recording.msgdefs import definition
 
@@ -34,6 +35,8 @@ TYPES = {MarkerArray: 'visualization_msgs/msg/MarkerArray',
          JointTrajectory: 'trajectory_msgs/msg/JointTrajectory',
          DiagnosticStatus: 'diagnostic_msgs/msg/DiagnosticStatus',
          DiagnosticArray: 'diagnostic_msgs/msg/DiagnosticArray'}
+FRAMES = '/wafer_planner/frames'
+"""Where the joint-space frame stands (foxglove.FrameTransform, kept as bytes here)."""
 MESSAGE_DATA = 0x01
 """The opcode of a binary message-data frame (server to client)."""
 
@@ -75,7 +78,7 @@ class Client:
         assert client.connection.subprotocol in SUBPROTOCOLS
         info = json.loads(await asyncio.wait_for(client.connection.recv(), 20))
         assert info['op'] == 'serverInfo' and info['name'] == '/wafer_planner'
-        while not set(TOPICS) <= set(client.channels):
+        while not set(TOPICS) | {FRAMES} <= set(client.channels):
             message = json.loads(await asyncio.wait_for(client.connection.recv(), 20))
             if message['op'] == 'advertise':
                 client.channels.update({c['topic']: c for c in message['channels']})
@@ -105,7 +108,8 @@ class Client:
                 subscription, log_time = struct.unpack_from('<IQ', frame, 1)
                 assert log_time > 0
                 kind = self.topics[subscription]
-                self.inbox[kind].append(deserialize_message(frame[13:], TOPICS[kind]))
+                self.inbox[kind].append(frame[13:] if kind == FRAMES else
+                                        deserialize_message(frame[13:], TOPICS[kind]))
         return await asyncio.wait_for(wait(), timeout)
 
     async def close(self) -> None:
@@ -174,6 +178,23 @@ def test_a_late_client_gets_the_roadmap_markers_and_every_answer(harness):
     assert {'path_joint_space', 'wafer_trace', 'robot'} <= {m.ns for m in path.markers}
     assert health.status[0].name == 'wafer_planner: health'
     assert values(health.status[0])['ready'] == 'True'
+
+
+def test_a_late_client_gets_where_the_joint_space_frame_stands(harness):
+    async def run():
+        client = await Client.connect(_url(harness))
+        await client.subscribe(FRAMES)
+        data = await client.receive(FRAMES)
+        await client.close()
+        return client.channels[FRAMES], data
+
+    channel, data = asyncio.run(run())
+    assert channel['schemaName'] == 'foxglove.FrameTransform'
+    # Protobuf keeps strings and doubles as they are: the frames, then the offset.
+    assert b'\x12\x04efem' in data and b'\x1a\x10efem_joint_space' in data
+    offset = markers.joint_space_offset(harness.node._worker.cell)
+    for value in offset[:2]:
+        assert struct.pack('<d', value) in data
 
 
 def test_a_client_that_never_reads_does_not_hold_the_node_up(harness):

@@ -7,7 +7,10 @@ Each published topic is a channel with the ``ros2msg`` schema the recording writ
 concatenated definition, ``recording.msgdefs``) and ``cdr`` messages: the very bytes that go
 out on DDS. The roadmap markers are latched as on DDS: whoever subscribes is sent the last
 ones. (The SDK's Python API cannot address one client, so the clients already subscribed get
-them once more: the same markers, no change in what they show.)
+them once more: the same markers, no change in what they show.) So is where the joint-space
+frame stands beside the cell (``markers.joint_space_offset``), on ``<node>/frames`` as a
+``foxglove.FrameTransform``: without ROS there is no ``/tf_static``, and Foxglove needs it
+to show joint space beside the cell.
 
 Only what some client has subscribed to is serialised and logged; logging copies it into
 each subscribed client's bounded outbox (the SDK drops a slow client's oldest messages) and
@@ -56,6 +59,9 @@ class LiveView:
         self._latched_lock = threading.Lock()
         self._failed = set()
         """Topics whose logging failed (logged once per start)."""
+        self.frames_topic = f'{name.rstrip("/")}/frames'
+        self._frame = None
+        """(parent, child, translation) of the joint-space frame, latched like the markers."""
         self.error = ''
 
     def start(self, host: str, port: int) -> bool:
@@ -105,15 +111,34 @@ class LiveView:
                 self.log.error(f'live view: {topic} not served: {reason_of(exc)} '
                                '(logged once per topic)')
 
+    def frame(self, parent: str, child: str, translation) -> None:
+        """Hand on where frame ``child`` stands in ``parent`` (m, not rotated); never raise."""
+        try:
+            with self._latched_lock:
+                self._frame = (parent, child, tuple(float(v) for v in translation))
+                self._resend_frame(self._served)
+        except Exception as exc:  # noqa: B902 - the live view must not stop the node
+            if self.frames_topic not in self._failed:
+                self._failed.add(self.frames_topic)
+                self.log.error(f'live view: {self.frames_topic} not served: {reason_of(exc)} '
+                               '(logged once)')
+
     def status(self) -> Dict[str, str]:
         """Return the live view's URL ('' when off) and why it does not serve ('' if none)."""
         served = self._served
         return {'live': served.url if served is not None else '', 'live_error': self.error}
 
-    def resend_latched(self, served: '_Served') -> None:
-        """Log the latched message again (a client has just subscribed to it)."""
+    def resend_latched(self, served: '_Served', topic: str) -> None:
+        """Log the latched message of ``topic`` again (a client has just subscribed to it)."""
         with self._latched_lock:
-            self._resend(served)
+            if topic == self.latched_topic:
+                self._resend(served)
+            elif topic == self.frames_topic:
+                self._resend_frame(served)
+
+    def _resend_frame(self, served: Optional['_Served']) -> None:
+        if served is not None and self._frame is not None and served.frames_subscribed():
+            served.log_frame(*self._frame)
 
     def _resend(self, served: Optional['_Served']) -> None:
         if served is None or self._latched is None or not served.subscribed(self.latched_topic):
@@ -136,6 +161,8 @@ class _Served:
 
     def __init__(self, view: LiveView, host: str, port: int):
         import foxglove  # here: a node without the live view does not need the SDK
+        import foxglove.channels
+        import foxglove.messages
         from foxglove.websocket import ServerListener
         served = self
 
@@ -144,13 +171,16 @@ class _Served:
 
             def on_subscribe(self, client, channel) -> None:
                 try:
-                    if channel.topic == view.latched_topic:
-                        view.resend_latched(served)
+                    if channel.topic in (view.latched_topic, view.frames_topic):
+                        view.resend_latched(served, channel.topic)
                 except Exception as exc:  # noqa: B902 - on the SDK's thread: never raise
                     view.log.error(f'live view: {channel.topic} not sent to client '
                                    f'{client.id}: {reason_of(exc)}')
 
         self._context = foxglove.Context()  # this node's channels only, not the process's
+        self._messages = foxglove.messages
+        self._frames = foxglove.channels.FrameTransformChannel(view.frames_topic,
+                                                               context=self._context)
         self._channels = {
             topic: foxglove.Channel(
                 topic, message_encoding='cdr', context=self._context,
@@ -169,6 +199,16 @@ class _Served:
     def subscribed(self, topic: str) -> bool:
         return self._channels[topic].has_sinks()
 
+    def frames_subscribed(self) -> bool:
+        return self._frames.has_sinks()
+
+    def log_frame(self, parent: str, child: str, translation) -> None:
+        x, y, z = translation
+        self._frames.log(self._messages.FrameTransform(
+            parent_frame_id=parent, child_frame_id=child,
+            translation=self._messages.Vector3(x=x, y=y, z=z),
+            rotation=self._messages.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)))
+
     def log(self, topic: str, data: bytes) -> None:
         self._channels[topic].log(data)
 
@@ -177,5 +217,5 @@ class _Served:
         self._close_channels()
 
     def _close_channels(self) -> None:
-        for channel in self._channels.values():
+        for channel in (*self._channels.values(), self._frames):
             channel.close()

@@ -219,19 +219,24 @@ class WaferPlannerNode(Node):
             publisher = self._roadmap_pub if kind is Sent.MARKERS else self._path_pub
             publisher.publish(msg)
             self._live.publish(publisher, msg)
-            if kind is Sent.MARKERS and self._tf_pub is not None:
-                self._tf_pub.publish(self._joint_space_transform())
+            if kind is Sent.MARKERS:
+                self._place_joint_space()
 
-    def _joint_space_transform(self):
-        """Return the static transform that puts the joint-space markers beside the cell."""
-        from geometry_msgs.msg import TransformStamped
-        msg = TransformStamped(child_frame_id=markers.joint_space_frame(self.settings.frame_id))
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = self.settings.frame_id
+    def _place_joint_space(self) -> None:
+        """Publish where the joint-space markers' frame stands beside the cell (static)."""
+        parent = self.settings.frame_id
+        child = markers.joint_space_frame(parent)
         offset = markers.joint_space_offset(self._worker.cell).tolist()
+        self._live.frame(parent, child, offset)
+        if self._tf_pub is None:
+            return
+        from geometry_msgs.msg import TransformStamped
+        msg = TransformStamped(child_frame_id=child)
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = parent
         t = msg.transform.translation
         t.x, t.y, t.z = offset
-        return TFMessage(transforms=[msg])
+        self._tf_pub.publish(TFMessage(transforms=[msg]))
 
     # ----------------------------------------------------------------- services, health
 
