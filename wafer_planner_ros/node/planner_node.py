@@ -58,6 +58,9 @@ from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
 # keep-last reader cache drops the oldest samples of a burst longer than its depth).
 RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
                       reliability=ReliabilityPolicy.RELIABLE)
+DELIVER_SLICE = 0.005
+"""s of publishing (and recording) per executor turn: a burst's answers, each recorded
+before it goes out, do not hold up ``~/get_status`` behind them."""
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # The QoS profiles, as the recording's channel metadata states them.
@@ -186,7 +189,13 @@ class WaferPlannerNode(Node):
             pass
 
     def _on_deliver(self) -> None:
+        """Publish what the worker handed over, for at most ``DELIVER_SLICE`` seconds a turn."""
+        began = time.monotonic()
         while True:
+            if time.monotonic() - began > DELIVER_SLICE:
+                # The rest on the next turn: status queries and requests get theirs between.
+                self._deliver.trigger()
+                return
             with self._outbox_lock:
                 if not self._outbox:
                     return
