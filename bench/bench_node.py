@@ -3,7 +3,10 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
 
 0. The station table at a cold start (an empty cache directory): how long after the
    roadmap serves it is planned, before anything is measured; then, in process, how long
-   loading it from the cache takes.
+   loading it from the cache takes. The compiled kernels come from numba's cache under the
+   default cache directory (``NUMBA_CACHE_DIR``, filled by any earlier start), as on a
+   machine that has run the node before: ``bench_startup.py`` measures the first start
+   after an install, which compiles them.
 1. End-to-end latency, one request at a time (every directed station pair three times,
    answered from the table, and 200 random free joint requests, optimised within
    ``planning.optimise_budget``): request publish to result receipt, against the planning
@@ -49,7 +52,7 @@ from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.node.planner_node import RELIABLE
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.reading import read
-from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.service.table import load_table
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'node.json'
@@ -119,6 +122,7 @@ def main() -> int:
     args = parser.parse_args()
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_DOMAIN_ID=str(150 + os.getpid() % 50))
+    env.setdefault('NUMBA_CACHE_DIR', str(DEFAULT_CACHE_DIR / 'numba'))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                       ROS_DOMAIN_ID=env['ROS_DOMAIN_ID'])
     recordings = tempfile.mkdtemp(prefix='bench_recordings_')
