@@ -3,14 +3,14 @@ Compiled kernels: numba functions that import numba only when one is first calle
 
 Importing numba and loading its first kernel costs about 0.3 s, more than half of the
 node's start-up budget; the node is ready before any kernel runs and loads them just after
-(``node.serving.warm_up``). A function decorated with :func:`kernel` is a :class:`Kernel`:
-calling it calls its numba dispatcher (``numba.njit(cache=True, ...)``), made on the first
-call. The dispatcher is made from a copy of the function whose globals name the compiled
-form of every other kernel it calls, so kernels call kernels in compiled code as numba
-functions do. ``Kernel.interpreted`` runs the same code as plain Python (the kernels it
-calls interpreted too): the cell file's polygons are checked that way when they are small,
-so that reading a cell needs no numba. :data:`objmode` stands for ``numba.objmode`` in a
-kernel (a no-op when interpreted).
+(``node.worker``, ``node.serving.warm_up``). A function decorated with :func:`kernel` is a
+:class:`Kernel`: calling it calls its numba dispatcher (``numba.njit(cache=True, ...)``),
+made on the first call. The dispatcher is made from a copy of the function whose globals
+name the compiled form of every other kernel it calls, so kernels call kernels in compiled
+code as numba functions do. ``Kernel.interpreted`` runs the same code as plain Python (the
+kernels it calls interpreted too): a cell file's polygons and its stations' clearances are
+checked that way when they are small (``sized``), so that reading a cell needs no numba.
+:data:`objmode` stands for ``numba.objmode`` in a kernel (a no-op when interpreted).
 
 Only this module imports numba (a contract in ``setup.cfg``). ``NUMBA_CACHE_DIR`` is read
 when numba is imported, on the first call of a kernel: set it before (the node does).
@@ -28,7 +28,7 @@ _KERNELS: List['Kernel'] = []
 class _ObjectMode:
     """The stand-in for ``numba.objmode`` (see the module's description)."""
 
-    def __call__(self, **types):
+    def __call__(self, **declared):
         """Return a context that does nothing (interpreted code is Python already)."""
         return contextlib.nullcontext()
 
