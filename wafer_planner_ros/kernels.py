@@ -23,6 +23,8 @@ from typing import Callable, List
 
 _LOCK = threading.RLock()
 _KERNELS: List['Kernel'] = []
+_MADE = threading.Event()
+"""Set once any kernel's dispatcher is made (numba is imported)."""
 
 
 class _ObjectMode:
@@ -72,6 +74,7 @@ class Kernel:
             if self._compiled is None:
                 function = _rebound(self.function, lambda k: k.compiled, numba.objmode)
                 self._compiled = numba.njit(**self.options)(function)
+                _MADE.set()
             return self._compiled
 
     @property
@@ -102,7 +105,7 @@ def kernel(function: Callable = None, **options):
 
 def loaded() -> bool:
     """Return whether numba has been imported by a kernel's first call."""
-    return any(k._compiled is not None for k in _KERNELS)
+    return _MADE.is_set()
 
 
 def sized(work: int, limit: int) -> Callable[[Kernel], Callable]:
