@@ -1,5 +1,6 @@
 """The planning node in-process: requests, answers, markers, services, bad input, load."""
 
+import logging
 import threading
 import time
 
@@ -12,6 +13,7 @@ import rclpy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
+from wafer_planner_ros.node.startup import core_warnings_to
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
@@ -497,3 +499,19 @@ def test_a_cell_that_cannot_be_loaded_is_reported_and_requests_are_not_ready(tmp
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_the_cores_warnings_reach_the_nodes_log():
+    said = {'warning': [], 'error': []}
+    log = type('Log', (), {'warning': said['warning'].append, 'error': said['error'].append})
+    handler = core_warnings_to(log)
+    core = logging.getLogger('wafer_planner_ros')
+    try:
+        logging.getLogger('wafer_planner_ros.recording.recorder').warning('%s: over by %d', 'f', 3)
+        logging.getLogger('wafer_planner_ros.roadmap.cache').info('not a warning')
+        logging.getLogger('wafer_planner_ros.service.table').error('broken %d', 1)
+    finally:
+        core.removeHandler(handler)
+        core.propagate = True
+    assert said == {'warning': ['wafer_planner_ros.recording.recorder: f: over by 3'],
+                    'error': ['wafer_planner_ros.service.table: broken 1']}

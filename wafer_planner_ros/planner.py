@@ -20,6 +20,7 @@ import numpy as np
 
 from wafer_planner_ros.cell.schema import brief
 from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.geometry.contacts import colliding
 from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
@@ -173,11 +174,12 @@ class Planner:
                                 f'[{lower[j]}, {upper[j]}]')
         model = self.cell.clearance_model
         if model.clearance(q)[0] <= 0.0:
-            contact = model.contact(q)
+            # Every body that collides, and how: a link crossing the wall, a wafer beyond it.
+            how = '; '.join(c.describe() for c in colliding(model, q)) or \
+                model.contact(q).describe()
             code = ErrorCode.START_IN_COLLISION if role == 'start' else \
                 ErrorCode.GOAL_IN_COLLISION
-            raise PlanningError(code, f'{role} {q.tolist()} is in collision '
-                                      f'({contact.describe()})')
+            raise PlanningError(code, f'{role} {q.tolist()} is in collision ({how})')
         return Endpoint(','.join(f'{v:g}' for v in q), ((None, q),))
 
     def plan(self, start, goal, deadline: Optional[float] = None,

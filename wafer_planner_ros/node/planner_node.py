@@ -49,6 +49,7 @@ from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
+from wafer_planner_ros.node.startup import core_warnings_to
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
@@ -80,6 +81,8 @@ class WaferPlannerNode(Node):
         super().__init__('wafer_planner', **kwargs)
         self.log = SafeLogger(self.get_logger())
         """The logger of the failure paths: it never raises."""
+        if own_process:
+            core_warnings_to(self.log)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         for spec in PARAMETERS:
             self.declare_parameter(spec.name, spec.default, _descriptor(spec))

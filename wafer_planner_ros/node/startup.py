@@ -5,10 +5,13 @@ The node is ready before numba is imported (``kernels``); its loading thread the
 kernels while the roadmap serves (``worker``). ``numba_cache`` puts numba's cache under the
 node's cache directory (set before numba is imported), ``kernels_announced`` logs that the
 kernels are being compiled, with progress, when they are (the first start after an install
-or an upgrade), and ``since_process_start`` measures readiness from the process's start.
+or an upgrade), ``since_process_start`` measures readiness from the process's start, and
+``core_warnings_to`` sends the core's warnings (Python ``logging``: the recorder's, the
+caches', the optimisers') to the node's log, where the rest of what it says goes.
 """
 
 import contextlib
+import logging
 import os
 from pathlib import Path
 import threading
@@ -81,3 +84,27 @@ def since_process_start() -> str:
     except (OSError, ValueError, IndexError, AttributeError):
         return ''
     return f', {age:.2f} s after the process started'
+
+
+class _ToNodeLog(logging.Handler):
+    """Hand warnings and errors to a logger that never raises (``faults.SafeLogger``)."""
+
+    def __init__(self, log):
+        super().__init__(logging.WARNING)
+        self._log = log
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = f'{record.name}: {record.getMessage()}'
+        except Exception:  # noqa: B902 - a record whose arguments do not format
+            text = f'{record.name}: {record.msg!r}'
+        (self._log.error if record.levelno >= logging.ERROR else self._log.warning)(text)
+
+
+def core_warnings_to(log) -> logging.Handler:
+    """Send the package's Python-logging warnings and errors to ``log``; return the handler."""
+    handler = _ToNodeLog(log)
+    core = logging.getLogger('wafer_planner_ros')
+    core.addHandler(handler)
+    core.propagate = False  # not to Python's last-resort stderr as well
+    return handler
