@@ -80,10 +80,11 @@ class PlanningWorker:
         """The roadmap before the serving one, for requests received before it took over."""
         self._table = (None, None)
         """(loaded_ns of the roadmap it belongs to, the station table)."""
-        self._table_phase: Optional[str] = None
-        """'loading' the station table from the cache (station requests wait), 'planning' it."""
         self._warming = False
-        """The kernels are being loaded (or compiled): the cached table, then the warm-up."""
+        """From taking over until its kernels are loaded: the cached station table (station
+        requests wait for it), then the warm-up."""
+        self._planning_table = False
+        """No station table was cached: it is being planned."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
@@ -203,7 +204,7 @@ class PlanningWorker:
             return {
                 'ready': serving is not None,
                 'busy_with': 'kernels' if self._warming
-                else 'station_table' if self._table_phase == 'planning'
+                else 'station_table' if self._planning_table
                 else 'load' if self._loading else 'plan' if self._planning else None,
                 'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
@@ -264,7 +265,7 @@ class PlanningWorker:
 
     def _await_table(self, serving: Serving, until: float) -> None:
         """Wait, with the lock held, while the station table of ``serving`` is loading."""
-        while self._table_phase == 'loading' and self._serving is serving \
+        while self._warming and self._serving is serving \
                 and self._table[0] != serving.loaded_ns and not self._stopping:
             left = until - time.monotonic()
             if left <= 0.0:
@@ -396,7 +397,7 @@ class PlanningWorker:
                 self._serving = Serving(planner, cached, loaded_ns)
                 self._loading_cell = None
                 self.load_failed, self.last_load_error = False, ''
-                self._table_phase = 'loading' if settings.station_table else None
+                self._warming = True
                 self.lock.notify_all()
         self._logger.info(
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
@@ -414,8 +415,6 @@ class PlanningWorker:
         # the roadmap serves: the cached station table first, which station requests wait
         # for, then a plan of each method; then the table is planned if it was not cached.
         table = None
-        with self.lock:
-            self._warming = True
         with kernels_announced(self._logger):
             try:
                 table = load_station_table(planner, settings, self._logger)
@@ -423,8 +422,7 @@ class PlanningWorker:
                 self._logger.error(f'station table not loaded: {reason_of(exc)}')
             with self.lock:
                 self._table = (loaded_ns, table)
-                self._table_phase = 'planning' if table is None and settings.station_table \
-                    else None
+                self._planning_table = table is None and settings.station_table
                 self.lock.notify_all()
             try:
                 warm_up(planner)
@@ -440,7 +438,7 @@ class PlanningWorker:
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         with self.lock:
-            self._table, self._table_phase = (loaded_ns, table), None
+            self._table, self._planning_table = (loaded_ns, table), False
 
     def _load_failed(self, exc: Exception, cell_file=None) -> None:
         """Say why the load failed; the serving roadmap, if any, serves on."""

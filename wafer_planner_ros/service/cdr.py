@@ -24,9 +24,7 @@ def joint_trajectory(stamp_sec: int, stamp_nanosec: int, frame_id: str,
                      velocities: np.ndarray, accelerations: np.ndarray) -> bytes:
     """Return the serialised message: points at ``times`` (s) with the given (N, J) rows."""
     writer = Writer()
-    writer.int32(stamp_sec)
-    writer.uint32(stamp_nanosec)
-    writer.string(frame_id)
+    writer.header(stamp_sec, stamp_nanosec, frame_id)
     writer.uint32(len(joint_names))
     for name in joint_names:
         writer.string(name)
@@ -106,6 +104,12 @@ class Writer:
         data = text.encode('utf-8') + b'\0'
         self.uint32(len(data))
         self.payload += data
+
+    def header(self, sec: int, nanosec: int, frame_id: str) -> None:
+        """Append a ``std_msgs/Header``: the stamp, then the frame."""
+        self.int32(sec)
+        self.uint32(nanosec)
+        self.string(frame_id)
 
     def boolean(self, value: bool) -> None:
         self.payload.append(1 if value else 0)

@@ -147,7 +147,7 @@ def _write(writer: Writer, marker: Marker) -> None:
                              f'values, got {len(values)}')
         return values
 
-    _header(writer, marker.stamp, marker.frame_id)
+    writer.header(*marker.stamp, marker.frame_id)
     writer.string(marker.ns)
     writer.int32(marker.id)
     writer.int32(int(marker.type))
@@ -162,7 +162,7 @@ def _write(writer: Writer, marker: Marker) -> None:
     writer.sequence(table('points', 3), '<f8')
     writer.sequence(table('colors', 4), '<f4')
     writer.string(marker.texture_resource)
-    _header(writer, marker.texture.stamp, marker.texture.frame_id)
+    writer.header(*marker.texture.stamp, marker.texture.frame_id)
     writer.string(marker.texture.format)
     writer.sequence(np.frombuffer(marker.texture.data, np.uint8), '<u1')
     writer.sequence(table('uv_coordinates', 2), '<f4')
@@ -171,9 +171,3 @@ def _write(writer: Writer, marker: Marker) -> None:
     writer.string(marker.mesh_file.filename)
     writer.sequence(np.frombuffer(marker.mesh_file.data, np.uint8), '<u1')
     writer.boolean(marker.mesh_use_embedded_materials)
-
-
-def _header(writer: Writer, stamp: Tuple[int, int], frame_id: str) -> None:
-    writer.int32(stamp[0])
-    writer.uint32(stamp[1])
-    writer.string(frame_id)
