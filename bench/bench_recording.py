@@ -184,7 +184,6 @@ def check_files(parent: Path) -> dict:
     files, messages_alone, owner, torn, repeated = 0, 0, {}, 0, 0
     sizes = []
     for bag in sorted(p for p in parent.iterdir() if p.is_dir()):
-        whole = 0
         with Reader(bag) as reader:
             whole = sum(1 for _ in reader.messages())
             assert whole == reader.message_count

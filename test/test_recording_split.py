@@ -5,6 +5,7 @@ Every file is read alone, and the bag as a whole, by the independent ``rosbags``
 split by an injected clock rather than by waiting.
 """
 
+from dataclasses import replace
 import json
 import time
 
@@ -182,6 +183,31 @@ def _loaded(clock) -> Loaded:
     return Loaded(default_cell_path().read_bytes(), {
         'cell': 'efem-3lp-2ll', 'roadmap_hash': 'abc123', 'roadmap_nodes': '1500',
         'roadmap_seed': '0'}, clock())
+
+
+def test_a_load_while_the_first_file_is_begun_is_in_that_file(tmp_path, monkeypatch):
+    # A roadmap load and new parameters that arrive after the first file's preamble was
+    # taken, before the recording is in place, are written right after it.
+    clock = Clock()
+    recording = NodeRecording('wafer_planner', TOPICS, MARKERS, print, Limits, clock)
+    recording.parameters({'trajectory.sample_period': 0.01})
+    recording.loaded(_loaded(clock))
+    taken = NodeRecording._preamble
+
+    def preamble_then_changes(self, since):
+        made = taken(self, since)
+        self.loaded(replace(_loaded(clock), values={'roadmap_hash': 'def456'}))
+        self.parameters({'trajectory.sample_period': 0.02})
+        return made
+
+    monkeypatch.setattr(NodeRecording, '_preamble', preamble_then_changes)
+    bag = recording.start(tmp_path)
+    recording.stop()
+    (file,) = bag_files(bag)
+    part = read_file(file)
+    hashes = [dict(m.metadata).get('roadmap_hash') for m in part.metadata]
+    assert hashes == ['abc123', 'def456']
+    assert [a.name for a in part.attachments].count('parameters.yaml') == 2
 
 
 def test_queued_requests_are_never_torn_from_their_answers(tmp_path):

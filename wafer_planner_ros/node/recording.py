@@ -80,6 +80,8 @@ class NodeRecording:
         self._held: Dict[int, Message] = {}
         """Requests waiting for their answers, by query number, oldest first."""
         self._loads = deque(maxlen=HISTORY)
+        self._preamble_saw = (None, None)
+        """The last roadmap load and parameters a file's preamble held."""
         self._parameters = deque(maxlen=HISTORY)
         """(log time, ``parameters.yaml``), oldest first."""
         self.last_error = ''
@@ -103,6 +105,13 @@ class NodeRecording:
             raise OSError(self.last_error) from exc
         with self._lock:
             self._recorder, self.last_error, self.last_directory = recorder, '', directory
+            # What changed while the first file's preamble was taken goes in after it.
+            load, parameters = self._preamble_saw
+            if self._loads and self._loads[-1] is not load:
+                self._add_loaded(recorder, self._loads[-1])
+            if self._parameters and self._parameters[-1] is not parameters:
+                when, data = self._parameters[-1]
+                recorder.attach(PARAMETERS_ATTACHMENT, data, when)
             recorder.flush()
             return directory
 
@@ -212,22 +221,27 @@ class NodeRecording:
             moment = min(moments)
             parameters = _in_force(self._parameters, moment, lambda item: item[0])
             loads = _in_force(self._loads, moment, lambda load: load.loaded_ns)
+            self._preamble_saw = (self._loads[-1] if self._loads else None,
+                                  self._parameters[-1] if self._parameters else None)
+        records = [self._load_records(load, now) for load in loads]
         attachments = [(PARAMETERS_ATTACHMENT, data, when, 'application/yaml')
-                       for when, data in parameters]
-        attachments += [(CELL_ATTACHMENT, load.cell_text, load.loaded_ns, 'application/yaml')
-                        for load in loads]
-        metadata = [(LOAD_METADATA, dict(load.values, loaded_ns=str(load.loaded_ns)))
-                    for load in loads]
-        markers = [(self._markers_topic, loads[-1].markers, now, now, 0)] \
-            if loads and loads[-1].markers else []
+                       for when, data in parameters] + [cell for cell, _, _ in records]
+        metadata = [values for _, values, _ in records]
+        markers = [records[-1][2]] if records and records[-1][2] is not None else []
         return Preamble(attachments, metadata, markers)
 
     def _add_loaded(self, recorder: Recorder, loaded: Loaded) -> None:
-        recorder.attach(CELL_ATTACHMENT, loaded.cell_text, loaded.loaded_ns)
-        recorder.metadata(LOAD_METADATA, dict(loaded.values, loaded_ns=str(loaded.loaded_ns)))
-        if loaded.markers:
-            now = self._clock()
-            recorder.record(self._markers_topic, loaded.markers, now, now, 0)
+        cell, values, markers = self._load_records(loaded, self._clock())
+        recorder.attach(*cell)
+        recorder.metadata(*values)
+        if markers is not None:
+            recorder.record(*markers)
+
+    def _load_records(self, load: Loaded, now: int) -> tuple:
+        """Return a load's cell attachment, its metadata record, its markers' message (or None)."""
+        return ((CELL_ATTACHMENT, load.cell_text, load.loaded_ns, 'application/yaml'),
+                (LOAD_METADATA, dict(load.values, loaded_ns=str(load.loaded_ns))),
+                (self._markers_topic, load.markers, now, now, 0) if load.markers else None)
 
     def _failed(self, message: str) -> None:
         self.last_error = message

@@ -292,9 +292,8 @@ class BagWriter:
         self.closed = True
         try:
             self._finish()
-            os.fsync(self._stream.fileno())
         finally:
-            self._stream.close()
+            sync_and_close(self._stream)
         return write_metadata_file(self.directory, self.metadata_text())
 
     def _finish(self) -> None:

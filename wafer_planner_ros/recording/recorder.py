@@ -353,10 +353,10 @@ class Recorder:
         """Apply ``keep``; return the older bags whose ``metadata.yaml`` must be rewritten."""
         if limits.keep <= 0:
             return ()
-        removed = retention.prune(self.directory, limits.keep if room is None else room,
-                                  protect)
+        removed, touched = retention.prune(
+            self.directory, limits.keep if room is None else room, protect)
         self.removed += len(removed)
-        return tuple(retention.touched_bags(removed, self.directory))
+        return tuple(touched)
 
     # -------------------------------------------------------------- the thread
 

@@ -16,7 +16,7 @@ import logging
 import os
 from pathlib import Path
 import re
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.recording.bag import bag_files, METADATA_FILE, write_metadata_file
@@ -44,14 +44,15 @@ def sibling_bags(bag: Path) -> List[Path]:
     return sorted(found | {bag}, key=lambda p: p.name)
 
 
-def prune(bag: Path, room: int, protect: Optional[Path] = None) -> List[Path]:
+def prune(bag: Path, room: int,
+          protect: Optional[Path] = None) -> Tuple[List[Path], List[Path]]:
     """
-    Remove the oldest files of ``bag``'s node until at most ``room`` are left; return them.
+    Remove the oldest files of ``bag``'s node until at most ``room`` are left.
 
-    ``protect`` (the file being written) counts but is never removed. Bags other than
-    ``bag`` left without files are removed; the others of those that lost files are returned by
-    ``touched_bags`` for ``rewrite_metadata``. A file that cannot be removed is logged
-    and counted as kept.
+    Return (the files removed, the bags other than ``bag`` that lost files and keep some,
+    for ``rewrite_metadata``). ``protect`` (the file being written) counts but is never
+    removed. Bags other than ``bag`` left without files are removed. A file that cannot be
+    removed is logged and counted as kept.
     """
     files = [f for b in sibling_bags(bag) for f in bag_files(b)]
     removed = []
@@ -69,16 +70,13 @@ def prune(bag: Path, room: int, protect: Optional[Path] = None) -> List[Path]:
             continue
         removed.append(file)
         logger.info('retention: removed %s', file)
-    for directory in {f.parent for f in removed} - {Path(bag)}:  # not the one being written
-        if not bag_files(directory):
+    touched = []
+    for directory in sorted({f.parent for f in removed} - {Path(bag)}):  # not the one written
+        if bag_files(directory):
+            touched.append(directory)
+        else:
             _remove_bag(directory)
-    return removed
-
-
-def touched_bags(removed: List[Path], exclude: Path) -> List[Path]:
-    """Return the bags (other than ``exclude``) that lost files and still have some."""
-    return sorted({f.parent for f in removed if f.parent != Path(exclude)
-                   and f.parent.is_dir() and bag_files(f.parent)})
+    return removed, touched
 
 
 def rewrite_metadata(bag: Path, attempts: int = 3) -> None:
