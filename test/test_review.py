@@ -298,7 +298,7 @@ def test_a_motion_figure_shows_times_stations_jerk_and_the_closest_approach(
         assert len(closest) == 1
         assert float(closest[0].split()[2]) == pytest.approx(
             float(values['min_clearance']) * 1000.0, abs=0.06)
-        assert re.search(r'mm, (shoulder|elbow|wrist) link|wafer vs boundary', closest[0])
+        assert re.search(r'mm, ((shoulder|elbow|wrist) link|wafer) vs boundary', closest[0])
         assert {text.get_text() for text in motion.texts} >= set(default_cell.stations)
         assert bar.get_ylabel() == 'time of the robot outlines (s)'
         assert bar.get_ylim() == pytest.approx((0.0, float(values['cycle_time'])), abs=0.011)

@@ -154,7 +154,7 @@ def plot_trajectory(cell, result, path, outlines: int = 14) -> Figure:
     q, qd, qdd, qddd = result.trajectory.evaluate_orders(t, range(4))
     return plot_motion(cell, t, q, qd, qdd,
                        f'{motion_label(result.start.label, result.goal.label, result.branches)}'
-                       f': cycle time {result.cycle_time:.3f} s (λ-scaled '
+                       f': cycle time {result.cycle_time:.3f} s (λ-scaled start '
                        f'{result.initial_cycle_time:.3f} s)', path, outlines, qddd=qddd,
                        curve=result.trajectory)
 

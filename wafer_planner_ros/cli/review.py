@@ -8,7 +8,7 @@ position, velocity, acceleration and jerk against their limits, and the wafer ac
 along x and y against its limit. A refused query shows the robot at its start and goal when
 they are known, the bodies in collision filled red with what they collide with, and the
 code and message. Beside each figure, ``DIR/thumb_NNNN.png``, a small copy.
-``DIR/index.html`` lists every query (number, receive time, id, from, to, status and code,
+``DIR/index.html`` lists every query (number, receive time, id, kind, from, to, status and code,
 cycle time, planning time, limit ratios, clearance, flags) with its thumbnail linking to its
 figure, after a summary of the flagged queries: a clearance below ``--flag-clearance`` or a
 planning time above ``--flag-planning``. The cell drawn is the one recorded with the query's

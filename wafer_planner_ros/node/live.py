@@ -55,7 +55,7 @@ class LiveView:
         self._lock = threading.Lock()
         self._served: Optional[_Served] = None
         self._latched = None
-        """The last latched message: its bytes, or the message until they are needed."""
+        """The last latched message's bytes."""
         self._latched_lock = threading.Lock()
         self._failed = set()
         """Topics whose logging failed (logged once per start)."""
@@ -143,8 +143,6 @@ class LiveView:
     def _resend(self, served: Optional['_Served']) -> None:
         if served is None or self._latched is None or not served.subscribed(self.latched_topic):
             return
-        if not isinstance(self._latched, bytes):  # serialised once, when first needed
-            self._latched = serialize_message(self._latched)
         served.log(self.latched_topic, self._latched)
 
     def _stop(self) -> None:

@@ -135,7 +135,7 @@ def path_scene(cell, trajectory, frame_id: str, stamp) -> List[Marker]:
     return [
         joint_marker('path_joint_space', 0, Shape.LINE_STRIP, points=_JointBox(cell).place(q),
                      scale=(0.006, 0.0, 0.0)),
-        cell_marker('wafer_trace', 0, Shape.LINE_STRIP, points=_xyz(arm.wafer_center(q)),
+        cell_marker('wafer_trace', 0, Shape.LINE_STRIP, points=arm.wafer_center(q),
                     scale=(0.006, 0.0, 0.0), color=WAFER_TRACE_COLOURS[0],
                     colors=start + (end - start) * along),
         _line(cell_marker, 'robot', 0, segments, 0.01, Shape.LINE_LIST),
@@ -183,7 +183,7 @@ def _stations(cell, cell_marker, names, configs) -> List[Marker]:
     for i, radius in enumerate(robot.link_radii):
         ends_of_link = np.concatenate([joints[:, i], joints[:, i + 1]])
         markers.append(cell_marker('station_link_ends', i, Shape.SPHERE_LIST,
-                                   points=_xyz(ends_of_link), scale=(2.0 * radius,) * 3,
+                                   points=ends_of_link, scale=(2.0 * radius,) * 3,
                                    color=COLOURS['stations']))
     offsets = _label_offsets(names, joints[:, 1, 1])
     for k, ((name, elbow), centre) in enumerate(zip(names, joints[:, 3])):

@@ -16,7 +16,7 @@ import numpy as np
 
 from wafer_planner_ros.geometry.contacts import body_contacts, BodyContact
 from wafer_planner_ros.trajectory.curve import Trajectory
-from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times
+from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times, steps
 
 MOST_CONFIGURATIONS = 200_000
 """Most configurations searched between the samples of one motion."""
@@ -77,8 +77,7 @@ def densified(times, q, qd, qdd, step: float = COLLISION_STEP) -> tuple:
     if total > MOST_CONFIGURATIONS:
         counts = np.maximum(counts * MOST_CONFIGURATIONS // total, 1)
     interval = np.repeat(np.arange(len(h)), counts)
-    s = ((np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
-         / np.repeat(counts, counts))[:, None]
+    s = (steps(counts) / np.repeat(counts, counts))[:, None]
     s3, s4, s5 = s ** 3, s ** 4, s ** 5
     span = h[interval]
     q0, q1 = q[interval], q[interval + 1]

@@ -110,6 +110,11 @@ def dense_clearance(trajectory: Trajectory, model) -> tuple:
     return float(model.clearance(q).min()), len(q)
 
 
+def steps(counts: np.ndarray) -> np.ndarray:
+    """Return 0, 1, ..., n - 1 for each count n of ``counts``, one after the other."""
+    return np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+
+
 def collision_times(trajectory: Trajectory) -> np.ndarray:
     """
     Return check times such that no joint moves more than COLLISION_STEP between two.
@@ -124,6 +129,6 @@ def collision_times(trajectory: Trajectory) -> np.ndarray:
     peaks = np.where(np.isfinite(peaks), peaks, 0.0)
     lengths = np.diff(boundaries)
     counts = np.maximum(np.ceil(lengths * peaks.max(axis=1) / COLLISION_STEP).astype(int), 1)
-    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    offsets = steps(counts)
     t = np.repeat(boundaries[:-1], counts) + offsets * np.repeat(lengths / counts, counts)
     return np.append(t, trajectory.duration)
