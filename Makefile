@@ -13,7 +13,7 @@ COLCON := $(ENV) colcon --log-base .colcon/log
 COLCON_PATHS := --paths $(CURDIR) --build-base .colcon/build --install-base .colcon/install
 RUN_ARGS ?=
 
-.PHONY: setup run test bench clean
+.PHONY: setup kernels run test bench clean
 
 setup: $(STAMP)
 
@@ -26,7 +26,12 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml
 	cd $(VENV)/bin && ln -sf ../lib/wafer_planner_ros/* .
 	@touch $(STAMP)
 
-run: $(STAMP)
+# The planning kernels compiled for this machine once (numba's cache under
+# ~/.cache/wafer_planner_ros/numba); later runs only load them, about a second.
+kernels: $(STAMP)
+	@$(ENV) $(PY) -m wafer_planner_ros.cli.kernels
+
+run: kernels
 	$(ENV) $(PY) -m wafer_planner_ros.node.planner_node --ros-args \
 		--params-file config/wafer_planner.yaml $(RUN_ARGS)
 
@@ -35,11 +40,14 @@ test: $(STAMP)
 	@# module): start from fresh copies, so that no stale module can be imported.
 	rm -rf .colcon/build/wafer_planner_ros/build .colcon/install/wafer_planner_ros/lib
 	$(COLCON) build $(COLCON_PATHS)
+	@# The kernels of the copy the tests import, compiled before any test runs.
+	@PYTHONPATH="$$(echo $(CURDIR)/.colcon/install/wafer_planner_ros/lib/python3*/site-packages)" \
+		$(ENV) $(PY) -m wafer_planner_ros.cli.kernels
 	$(COLCON) test $(COLCON_PATHS) --return-code-on-test-failure \
 		--event-handlers console_direct+ --pytest-args -p no:cacheprovider
 	$(COLCON) test-result --test-result-base .colcon/build --verbose
 
-bench: $(STAMP)
+bench: kernels
 	$(PY) -m pip install --disable-pip-version-check -q -r bench/requirements.txt
 	$(ENV) $(PY) bench/bench_roadmap.py
 	$(ENV) $(PY) bench/bench_plan.py

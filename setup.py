@@ -28,6 +28,7 @@ setup(
             'wafer-roadmap = wafer_planner_ros.cli.roadmap:entry_point',
             'wafer-plan = wafer_planner_ros.cli.plan:entry_point',
             'wafer-plan-client = wafer_planner_ros.cli.client:entry_point',
+            'wafer-kernels = wafer_planner_ros.cli.kernels:entry_point',
             'wafer-recover = wafer_planner_ros.cli.recover:entry_point',
             'wafer-replay = wafer_planner_ros.cli.replay:entry_point',
             'wafer-review = wafer_planner_ros.cli.review:entry_point',

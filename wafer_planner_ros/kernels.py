@@ -12,11 +12,19 @@ kernels it calls interpreted too): a cell file's polygons and its stations' clea
 checked that way when they are small (``sized``), so that reading a cell needs no numba.
 :data:`objmode` stands for ``numba.objmode`` in a kernel (a no-op when interpreted).
 
-Only this module imports numba (a contract in ``setup.cfg``). ``NUMBA_CACHE_DIR`` is read
-when numba is imported, on the first call of a kernel: set it before (the node does).
+Where numba keeps them: ``NUMBA_CACHE_DIR`` when it is set, else :func:`cache_root`
+(``$XDG_CACHE_HOME/wafer_planner_ros/numba``, by default ``~/.cache/...``), the same for the
+node and every tool whatever their other cache directories, set when numba is first imported
+here. ``wafer-kernels`` compiles every kernel into it once after an install
+(``service.kernel_warmup``); :func:`load_cached` then loads them all in a fraction of a second,
+and :func:`uncached` names the kernels that would still compile.
+
+Only this module imports numba (a contract in ``setup.cfg``).
 """
 
 import contextlib
+import os
+from pathlib import Path
 import threading
 import types
 from typing import Callable, List
@@ -69,7 +77,7 @@ class Kernel:
         """Return the numba dispatcher (made, not yet compiled, on first use)."""
         if self._compiled is not None:
             return self._compiled
-        import numba  # outside the lock: Python's import lock serialises the import
+        numba = _numba()  # outside the lock: Python's import lock serialises the import
         with _LOCK:
             if self._compiled is None:
                 function = _rebound(self.function, lambda k: k.compiled, numba.objmode)
@@ -91,6 +99,27 @@ class Kernel:
         """Return how many signatures of this kernel were compiled, not loaded from cache."""
         compiled = self._compiled
         return 0 if compiled is None else sum(list(compiled.stats.cache_misses.values()))
+
+    def load_cached(self) -> int:
+        """
+        Load every signature numba's cache holds for this kernel on this machine; return how many.
+
+        Entries made for another machine or another version of the function's code are left
+        alone (numba would not use them either).
+        """
+        dispatcher = self.compiled
+        cache = dispatcher._cache  # numba 0.68's cache: its index lists the signatures
+        index = cache._cache_file._load_index()
+        current = cache._index_key((), dispatcher.targetctx.codegen())[1:]
+        signatures = [key[0] for key in index if tuple(key[1:]) == current]
+        for signature in signatures:
+            dispatcher.compile(signature)  # found in the cache: loaded, not compiled
+        return len(signatures)
+
+    def signatures(self) -> list:
+        """Return the signatures this process has of the kernel (compiled or loaded)."""
+        compiled = self._compiled
+        return [] if compiled is None else list(compiled.signatures)
 
 
 def kernel(function: Callable = None, **options):
@@ -120,11 +149,49 @@ def sized(work: int, limit: int) -> Callable[[Kernel], Callable]:
     return lambda k: k
 
 
+def cache_root() -> Path:
+    """Return where numba keeps the kernels (see the module's description)."""
+    configured = os.environ.get('NUMBA_CACHE_DIR')
+    if configured:
+        return Path(configured)
+    base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
+    return Path(base) / 'wafer_planner_ros' / 'numba'
+
+
+def _numba():
+    """Import numba, its cache directory set first (``cache_root``)."""
+    os.environ.setdefault('NUMBA_CACHE_DIR', str(cache_root()))
+    import numba
+    return numba
+
+
+def registered() -> List['Kernel']:
+    """Return every kernel of the modules imported so far."""
+    with _LOCK:
+        return list(_KERNELS)
+
+
+def load_cached() -> int:
+    """Load every kernel's cached signatures (``Kernel.load_cached``); return how many."""
+    return sum(k.load_cached() for k in registered())
+
+
+def uncached() -> List['Kernel']:
+    """
+    Return the kernels that a call would still compile (after ``load_cached``).
+
+    Those without any signature that no other kernel calls: a kernel called only from
+    compiled code is compiled into its callers and has no signature of its own.
+    """
+    everything = registered()
+    called = {id(value) for k in everything for name in k.function.__code__.co_names
+              if isinstance(value := k.function.__globals__.get(name), Kernel)}
+    return [k for k in everything if not k.signatures() and id(k) not in called]
+
+
 def compiled_count() -> int:
     """Return how many kernel signatures this process compiled rather than loaded."""
-    with _LOCK:
-        kernels = list(_KERNELS)
-    return sum(k.compiled_count() for k in kernels)
+    return sum(k.compiled_count() for k in registered())
 
 
 def cache_directory() -> str:

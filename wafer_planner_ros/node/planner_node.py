@@ -18,6 +18,8 @@ answering it ends the node (a failure of the node's own is answered ``INTERNAL``
 from collections import deque
 import itertools
 import json
+import logging
+import os
 import sys
 import threading
 import time
@@ -49,7 +51,7 @@ from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
-from wafer_planner_ros.node.startup import core_warnings_to
+from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
@@ -62,6 +64,9 @@ RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
 DELIVER_SLICE = 0.005
 """s of publishing (and recording) per executor turn: a burst's answers, each recorded
 before it goes out, do not hold up ``~/get_status`` behind them."""
+STOP_WAIT = 0.2
+"""s a stopping node waits for the worker's threads: idle ones end at once; a plan, a roadmap
+build or a station table being planned ends with the process (they write only whole files)."""
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # The QoS profiles, as the recording's channel metadata states them.
@@ -76,7 +81,8 @@ class WaferPlannerNode(Node):
         """
         Declare and check the parameters, set up the interfaces, start the worker.
 
-        ``own_process``: the node has the process to itself (``main``), see ``PlanningWorker``.
+        ``own_process``: the node has the process to itself (``main``): the core's Python
+        logging goes to the node's log.
         """
         super().__init__('wafer_planner', **kwargs)
         self.log = SafeLogger(self.get_logger())
@@ -130,7 +136,7 @@ class WaferPlannerNode(Node):
         self.create_timer(1.0, self._publish_health)
         self._worker = PlanningWorker(lambda: self.settings, self._recording,
                                       lambda *items: self._send(*items), self.get_logger(),
-                                      lambda: self.get_clock().now().to_msg(), own_process)
+                                      lambda: self.get_clock().now().to_msg())
 
     # ----------------------------------------------------------------- requests in
 
@@ -412,13 +418,13 @@ class WaferPlannerNode(Node):
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:
-        """Close the recording, stop the worker (after its request), destroy the node."""
+        """Close the recording, stop the worker's threads (not waiting for a plan), destroy."""
         self._worker.request_stop()
-        # First: a worker busy building a roadmap may outlast a launcher's patience, and
-        # answers not yet published are not recorded either.
+        # First: answers not yet published are not recorded either, and a plan or a
+        # station table being planned is not waited for (``STOP_WAIT``).
         self._log_closed(*self._stop_recording())
         self._live.stop()
-        self._worker.join(timeout=30.0)
+        self._worker.join(timeout=STOP_WAIT)
         super().destroy_node()
 
 
@@ -439,6 +445,7 @@ def main(args=None) -> int:
     # The worker plans in Python: let the executor's threads in for the GIL every 1 ms
     # (default 5 ms) so that status queries and answers are not held up by planning.
     sys.setswitchinterval(0.001)
+    load_kernels()  # from numba's cache, beside ROS's start and the roadmap's load
     rclpy.init(args=args)
     node, executor, code = None, None, 0
     try:
@@ -461,8 +468,19 @@ def main(args=None) -> int:
 
 
 def entry_point() -> None:
-    """Console script ``wafer_planner_node``."""
-    raise SystemExit(main())
+    """
+    Console script ``wafer_planner_node``: run, then end the process at once.
+
+    A plan, a roadmap build or a station table still running in the worker's threads is
+    abandoned (the recording is closed, and every file the core writes is written whole:
+    a temporary file, then a rename), not left to the interpreter's shutdown, where compiled
+    code still running in a thread can abort the process.
+    """
+    code = main()
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == '__main__':

@@ -2,10 +2,10 @@
 A roadmap ready to serve: its planner, when it took over, and how it got there.
 
 The worker's loading thread builds or loads a roadmap (``progress_reporter`` logs the
-build) and hands it over as a ``Serving``: from then on the node is ready. Then, while it
-serves, the compiled kernels load (``node.startup``): the cached station table
-(``load_station_table``), which also verifies its entries, then a plan by each method
-(``warm_up``); when the table was not cached, it is planned then (``build_station_table``).
+build), waits for the compiled kernels (``node.startup``), loads the cached station table
+(``load_station_table``), which also verifies its entries, and hands it all over as a
+``Serving``: from then on the node is ready. When the table was not cached, it is planned
+then (``build_station_table``).
 ``plan_request`` chooses how a request is answered: a station pair from the table when it
 holds it; a station pair it does not hold (yet) by the corridor curve, which takes
 milliseconds; anything else by the whole-curve optimisation within
@@ -16,7 +16,6 @@ from dataclasses import dataclass, replace
 import time
 from typing import Optional
 
-from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
 from wafer_planner_ros.service.table import build_and_store_table, load_table, StationTable
@@ -24,8 +23,6 @@ from wafer_planner_ros.service.table import TableError
 
 MIN_BUDGET = 0.05
 """s: a budget below this (the request's deadline is near) gets the corridor curve."""
-WARM_UP_BUDGET = 0.05
-"""s of whole-curve optimisation in the warm-up: enough to load its kernels."""
 
 
 @dataclass(frozen=True)
@@ -112,14 +109,3 @@ def plan_request(planner: Planner, table: Optional[StationTable], request, setti
                     replace(planner.settings, method='whole-curve'))
     result = whole.plan(request.start, request.goal, deadline=deadline, budget=budget)
     return replace(result, metrics=dict(result.metrics, budget=budget))
-
-
-def warm_up(planner: Planner) -> None:
-    """Plan once by each method, so that the compiled kernels are loaded (or compiled)."""
-    names = sorted(planner.cell.stations)
-    for method, budget in (('knot-timing', None), ('whole-curve', WARM_UP_BUDGET)):
-        try:
-            Planner(planner.cell, planner.roadmap, replace(planner.settings, method=method)
-                    ).plan(names[0], names[-1], budget=budget)
-        except (PlanningError, IndexError):
-            pass  # a cell whose first and last stations cannot be joined still warms up

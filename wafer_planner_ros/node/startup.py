@@ -1,11 +1,13 @@
 """
-The node's process at start-up: where numba keeps the kernels, and saying what loads.
+The node's process at start-up: the compiled kernels loaded early, and saying what loads.
 
-The node is ready before numba is imported (``kernels``); its loading thread then loads the
-kernels while the roadmap serves (``worker``). ``numba_cache`` puts numba's cache under the
-node's cache directory (set before numba is imported), ``kernels_announced`` logs that the
-kernels are being compiled, with progress, when they are (the first start after an install
-or an upgrade), ``since_process_start`` measures readiness from the process's start, and
+The node is ready only once it can answer: its roadmap loaded and the compiled kernels too
+(``worker``). ``load_kernels`` starts loading the kernels from numba's cache
+(``kernels.load_cached``) in a thread of their own as the process starts, beside the
+imports, the node's set-up and the roadmap's load; ``kernels_ready`` waits for that and,
+only if some kernel is not in the cache (an upgrade of the package, another machine),
+compiles them (``service.warmup``), announced by ``kernels_announced`` with progress.
+``since_process_start`` measures readiness from the process's start, and
 ``core_warnings_to`` sends the core's warnings (Python ``logging``: the recorder's, the
 caches', the optimisers') to the node's log, where the rest of what it says goes.
 """
@@ -13,10 +15,9 @@ caches', the optimisers') to the node's log, where the rest of what it says goes
 import contextlib
 import logging
 import os
-from pathlib import Path
 import threading
 import time
-from typing import Optional
+from typing import Callable, Optional
 
 from wafer_planner_ros import kernels
 
@@ -31,8 +32,8 @@ def kernels_announced(logger):
     """
     Log, while the body runs, that the compiled kernels are being compiled, if they are.
 
-    Loading them from numba's cache takes a fraction of a second; compiling them, at the
-    first start after an install or an upgrade, about 20 s: that is announced after
+    Loading them from numba's cache takes a fraction of a second; compiling them, when the
+    set-up did not (``wafer-kernels``), about 30 s: that is announced after
     ``ANNOUNCE_AFTER`` seconds, with progress every ``ANNOUNCE_EVERY`` seconds.
     """
     done, begun, before = threading.Event(), time.monotonic(), kernels.compiled_count()
@@ -44,10 +45,10 @@ def kernels_announced(logger):
             if not compiled:
                 continue
             if not announced:
-                where = kernels.cache_directory() or "numba's cache"
-                logger.info('compiling the planning kernels for this machine: the first '
-                            'start after an install or an upgrade takes about 20 s (they '
-                            f'are kept in {where})')
+                logger.info('compiling the planning kernels for this machine: not found in '
+                            f'{kernels.cache_root()} (`wafer-kernels` compiles them ahead, '
+                            'as the set-up does); about 30 s, requests are answered '
+                            'ROADMAP_NOT_READY meanwhile')
                 announced = True
                 continue
             logger.info(f'compiling the planning kernels: {compiled} compiled so far, '
@@ -68,11 +69,68 @@ def kernels_announced(logger):
             logger.info(f'planning kernels loaded in {seconds:.2f} s')
 
 
-def numba_cache(cache_dir: Optional[Path]) -> None:
-    """Have numba keep its compiled kernels under ``cache_dir`` (before numba is loaded)."""
-    if cache_dir is not None and 'NUMBA_CACHE_DIR' not in os.environ \
-            and not kernels.loaded():
-        os.environ['NUMBA_CACHE_DIR'] = str(Path(cache_dir) / 'numba')
+class _KernelLoading:
+    """The kernels' load from numba's cache, once per process, in a thread of its own."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._thread: Optional[threading.Thread] = None
+        self._compiled = threading.Event()
+        """Set once every kernel is loaded or compiled."""
+        self.loaded = 0
+        """Signatures loaded from the cache."""
+        self.error: Optional[BaseException] = None
+
+    def start(self) -> None:
+        with self._lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._load, daemon=True,
+                                                name='wafer_planner_kernels_load')
+                self._thread.start()
+
+    def _load(self) -> None:
+        try:
+            from wafer_planner_ros.service import warmup  # noqa: F401 - every kernel's module
+            self.loaded = kernels.load_cached()
+        except Exception as exc:  # noqa: B902 - then they compile when used
+            self.error = exc
+
+    def ready(self, logger, compiling: Callable[[], None]) -> None:
+        self.start()
+        self._thread.join()
+        if self._compiled.is_set():
+            return
+        with self._lock:  # one compile at a time (a rebuild cannot start meanwhile anyway)
+            if self._compiled.is_set():
+                return
+            if self.error is not None:
+                logger.warning(f'the planning kernels could not be loaded from '
+                               f'{kernels.cache_root()}: {self.error}')
+            missing = kernels.uncached()
+            if missing:
+                compiling()
+                from wafer_planner_ros.service.warmup import compile_kernels
+                with kernels_announced(logger):
+                    compile_kernels()
+            self._compiled.set()
+
+
+_KERNELS = _KernelLoading()
+
+
+def load_kernels() -> None:
+    """Start loading the compiled kernels from numba's cache (once; returns at once)."""
+    _KERNELS.start()
+
+
+def kernels_ready(logger, compiling: Callable[[], None] = lambda: None) -> None:
+    """
+    Return once every kernel is loaded: from the cache, or compiled now if some are missing.
+
+    ``compiling()`` is called first when they must be compiled (tens of seconds), which
+    ``kernels_announced`` then logs with progress.
+    """
+    _KERNELS.ready(logger, compiling)
 
 
 def since_process_start() -> str:

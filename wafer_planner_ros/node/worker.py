@@ -1,27 +1,30 @@
 """
-The node's planning worker: a planning thread and a loading thread (SPEC section 5).
+The node's planning worker: planning, table-answering, watchdog and loading threads.
 
 The planning thread plans one request at a time. Requests wait in a bounded backlog
-(``planning.max_queue``; beyond it the answer is ``BUSY``); a request still waiting
-``planning.timeout`` seconds after its receipt is answered ``TIMEOUT``. The loading thread
-loads the roadmap at start-up (requests meanwhile are answered ``ROADMAP_NOT_READY``) and
-rebuilds it on request: the previous roadmap serves until the new one is ready, and keeps
-serving when the rebuild fails (``rebuild_failed`` in the status says why). Once the
-roadmap serves the node is ready, before any compiled kernel is loaded; the loading thread
-then loads the kernels (``busy_with: kernels``): first the cached station table, which a
-station request received meanwhile waits for (up to ``TABLE_WAIT`` of its timeout), then a
-warm-up plan by each method; when no table was cached it plans one (``busy_with:
-station_table``), station pairs getting the corridor curve meanwhile. A rebuild is refused
-until all that is done. Each request is planned on the roadmap in force when it was
-received, the one a recording pairs it with, and answered as ``serving.plan_request``
-chooses. The worker never publishes: it hands every message, already serialised, to
-``send``, which the node publishes from its executor. Every request gets exactly one
-answer, whatever happens: a failure of the node itself is answered ``INTERNAL`` with the
-reason.
+(``planning.max_queue``; beyond it the answer is ``BUSY``). A station pair that the station
+table holds never waits behind planning: the answering thread gives it at once. Every
+queued request is answered by ``planning.timeout`` seconds after its receipt: the watchdog
+thread answers ``TIMEOUT`` at that instant for one not answered yet (waiting or still being
+planned), and a plan finished later is dropped, never sent. The loading thread loads the
+roadmap, waits for the compiled kernels (``startup.kernels_ready``: loaded from numba's
+cache since the process started, or compiled when missing) and loads the cached station
+table, and only then does the roadmap serve: the node is ready when it can answer, and
+until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. When no
+table was cached it is planned next (``busy_with: station_table``), station pairs getting
+the corridor curve meanwhile. A rebuild does the same while the previous roadmap serves,
+and keeps it serving when it fails (``rebuild_failed`` in the status says why). Each
+request is planned on the roadmap in force when it was received, the one a recording pairs
+it with, and answered as ``serving.plan_request`` chooses. The worker never publishes: it
+hands every message, already serialised, to ``send``, which the node publishes from its
+executor. Every request gets exactly one answer, whatever happens: a failure of the node
+itself is answered ``INTERNAL`` with the reason. On stop the threads are left as they are
+(daemons): the node never waits for a plan or a table being planned.
 """
 
 from collections import deque
 import gc
+import heapq
 import threading
 import time
 from typing import Callable, Optional
@@ -34,74 +37,77 @@ from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.node.serving import build_station_table, held_pairs, load_station_table
-from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving, warm_up
-from wafer_planner_ros.node.startup import kernels_announced, numba_cache, since_process_start
+from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving
+from wafer_planner_ros.node.startup import kernels_ready, since_process_start
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.settings import NodeSettings
 
-TABLE_WAIT = 0.5
-"""A station request waits for the station table being loaded up to this fraction of
-``planning.timeout`` after its receipt (then it gets the corridor curve)."""
 PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
+NOT_LOADED = 'the roadmap is being loaded or built'
 
 
 class PlanningWorker:
-    """The loading and planning threads, the backlog and their state; see the module."""
+    """The loading, planning, answering and watchdog threads and their state; see the module."""
 
     def __init__(self, settings: Callable[[], NodeSettings], recording: NodeRecording,
-                 send: Callable, logger, stamp: Callable, own_process: bool = False):
+                 send: Callable, logger, stamp: Callable):
         """
         Start the threads; the loading one first loads the roadmap.
 
         ``settings`` returns the node's current settings; ``send(*items)`` hands
         (kind, message, query number) items to the executor and never raises; ``stamp``
-        returns a ROS time; ``own_process``: the node has the process to itself, so numba
-        keeps its kernels in the cache directory (``startup.numba_cache``).
+        returns a ROS time.
         """
-        self._own_process = own_process
         self._settings, self._recording, self._send = settings, recording, send
         self._logger, self._stamp = SafeLogger(logger), stamp
         self.lock = threading.Condition()
         """
-        Guards the backlog, the roadmaps, the load state, the station table and the counts;
-        wakes the threads.
+        Guards the queues, the open queries, the roadmaps, the load state, the station table
+        and the counts; wakes the threads.
 
         ``cell`` and ``answer_error`` read ``_serving`` without it: one reference, replaced
         whole under the lock, so a read sees the old roadmap or the new one, never half.
         """
         self._backlog = deque()
-        """(number, request, received monotonic, received ns) of the waiting requests."""
+        """(number, request, received monotonic, received ns) of the requests to plan."""
+        self._lane = deque()
+        """The same of station pairs the station table holds: answered at once."""
+        self._open = {}
+        """number -> (request, deadline, timeout) of every queued query not yet answered."""
+        self._deadlines = []
+        """Heap of (deadline, number) of the open queries, for the watchdog."""
+        self._planned = set()
+        """Numbers of the queries being planned (not waiting)."""
         self._serving: Optional[Serving] = None
         self._previous: Optional[Serving] = None
         """The roadmap before the serving one, for requests received before it took over."""
         self._table = (None, None)
         """(loaded_ns of the roadmap it belongs to, the station table)."""
-        self._warming = False
-        """From taking over until its kernels are loaded: the cached station table (station
-        requests wait for it), then the warm-up."""
         self._planning_table = False
         """No station table was cached: it is being planned."""
+        self._compiling = False
+        """The compiled kernels are missing from numba's cache: they are being compiled."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
         self._loading = True
-        self._planning = False
         self.load_failed = False
         """The last load or rebuild failed (``last_load_error`` says why)."""
         self.last_load_error = ''
         self.counts = {'served': 0, 'failed': 0}
         self.last_error = ''
         self._stopping = False
-        self._thread = threading.Thread(target=self._work, name='wafer_planner_worker',
-                                        daemon=True)
-        self._loader = threading.Thread(target=self._load, name='wafer_planner_loader',
-                                        daemon=True)
-        self._thread.start()
-        self._loader.start()
+        self._threads = [threading.Thread(target=target, name=name, daemon=True) for name, target
+                         in (('wafer_planner_worker', lambda: self._work(self._backlog)),
+                             ('wafer_planner_table', lambda: self._work(self._lane)),
+                             ('wafer_planner_watchdog', self._watch),
+                             ('wafer_planner_loader', self._load))]
+        for thread in self._threads:
+            thread.start()
 
     @property
     def cell(self) -> Optional[Cell]:
@@ -122,19 +128,21 @@ class PlanningWorker:
         try:
             settings = self._settings()
             with self.lock:
-                if self._serving is None:
-                    reason = f'roadmap not loaded: {self.last_load_error}' \
-                        if self.load_failed and not self._loading else \
-                        'the roadmap is being loaded or built'
-                    code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {reason}'
-                elif len(self._backlog) >= settings.max_queue:
+                serving = self._serving
+                if serving is None:
+                    code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {self._not_ready()}'
+                elif not self._held(serving, request) \
+                        and len(self._backlog) >= settings.max_queue:
                     code = ErrorCode.BUSY
                     message = (f'busy: {settings.max_queue} requests are already waiting '
                                '(planning.max_queue)')
                 else:
-                    self._backlog.append((number, request, received,
-                                          time.time_ns() if received_ns is None
-                                          else received_ns))
+                    item = (number, request, received,
+                            time.time_ns() if received_ns is None else received_ns)
+                    (self._lane if self._held(serving, request) else self._backlog).append(item)
+                    deadline = received + settings.timeout
+                    self._open[number] = (request, deadline, settings.timeout)
+                    heapq.heappush(self._deadlines, (deadline, number))
                     self.lock.notify_all()
                     return
         except Exception as exc:  # noqa: B902 - every request gets its one answer
@@ -151,13 +159,14 @@ class PlanningWorker:
                 return False
             self._loading = True
         try:
-            self._loader = threading.Thread(target=self._load, name='wafer_planner_loader',
-                                            daemon=True)
-            self._loader.start()
+            loader = threading.Thread(target=self._load, name='wafer_planner_loader',
+                                      daemon=True)
+            loader.start()
         except Exception:
             with self.lock:
                 self._loading = False
             raise
+        self._threads[-1] = loader
         return True
 
     def answer_error(self, number, request_id, code, message, start, goal,
@@ -203,9 +212,10 @@ class PlanningWorker:
             cell = serving.planner.cell if serving is not None else self._loading_cell
             return {
                 'ready': serving is not None,
-                'busy_with': 'kernels' if self._warming
+                'busy_with': 'kernels' if self._compiling
                 else 'station_table' if self._planning_table
-                else 'load' if self._loading else 'plan' if self._planning else None,
+                else 'load' if self._loading
+                else 'plan' if self._planned else None,
                 'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
                 'edges': roadmap.edge_count if roadmap is not None else 0,
@@ -220,35 +230,88 @@ class PlanningWorker:
             }
 
     def request_stop(self) -> None:
-        """Have the planning thread stop after the request it is planning (see ``join``)."""
+        """Have the threads stop taking work (see ``join``)."""
         with self.lock:
             self._stopping = True
             self.lock.notify_all()
 
     def join(self, timeout: float) -> None:
-        """Wait up to ``timeout`` seconds in all for the threads to stop."""
+        """
+        Wait up to ``timeout`` seconds in all for the threads to stop.
+
+        A plan, a roadmap build or a station table being planned is not waited for beyond
+        that: the threads are daemons, ended with the process.
+        """
         deadline = time.monotonic() + timeout
-        for thread in (self._thread, self._loader):
+        for thread in list(self._threads):
             thread.join(max(0.0, deadline - time.monotonic()))
 
     # ----------------------------------------------------------------- planning
 
-    def _work(self) -> None:
+    def _held(self, serving: Serving, request) -> bool:
+        """Return whether the serving station table holds the request; call with the lock."""
+        loaded_ns, table = self._table
+        return table is not None and loaded_ns == serving.loaded_ns \
+            and isinstance(request.start, str) and isinstance(request.goal, str) \
+            and (request.start, request.goal) in table.entries
+
+    def _not_ready(self) -> str:
+        """Return why the node cannot answer yet; call with the lock held."""
+        if self._compiling:
+            return ('the planning kernels are being compiled for this machine (about 30 s; '
+                    '`wafer-kernels` compiles them ahead)')
+        if self.load_failed and not self._loading:
+            return f'roadmap not loaded: {self.last_load_error}'
+        return NOT_LOADED
+
+    def _work(self, queue: deque) -> None:
+        """Answer the requests of ``queue`` one at a time until stopped."""
         while True:
             with self.lock:
-                while not self._backlog and not self._stopping:
+                while not queue and not self._stopping:
                     self.lock.wait()
                 if self._stopping:
                     return
-                item = self._backlog.popleft()
-                self._planning = True
+                item = queue.popleft()
+                if item[0] not in self._open:
+                    continue  # answered TIMEOUT while it waited
+                self._planned.add(item[0])
             try:
                 self._plan(*item)
             except Exception as exc:  # noqa: B902 - the thread outlives any one request
                 self._logger.error(f'planning thread: {reason_of(exc)}')
             finally:
                 with self.lock:
-                    self._planning = False
+                    self._planned.discard(item[0])
+
+    def _watch(self) -> None:
+        """Answer ``TIMEOUT`` for every query still open at its deadline, at that instant."""
+        while True:
+            with self.lock:
+                expired = []
+                while not expired and not self._stopping:
+                    now = time.monotonic()
+                    while self._deadlines and self._deadlines[0][0] <= now:
+                        number = heapq.heappop(self._deadlines)[1]
+                        if number in self._open:
+                            expired.append((number, self._open.pop(number),
+                                            number in self._planned, len(self._planned)))
+                    if not expired:
+                        self.lock.wait(self._deadlines[0][0] - now if self._deadlines
+                                       else None)
+                if self._stopping:
+                    return
+            for number, (request, _, timeout), planned, busy in expired:
+                doing = 'its planning did not finish' if planned else \
+                    f'it waited behind {busy} request{"s" * (busy != 1)} being planned'
+                self.answer_error(number, request.request_id, ErrorCode.TIMEOUT,
+                                  f'not answered within planning.timeout ({timeout:g} s) of '
+                                  f'its receipt: {doing}', request.start, request.goal)
+
+    def _claim(self, number: int) -> bool:
+        """Return True once for an open query (it is then answered), False if answered."""
+        with self.lock:
+            return self._open.pop(number, None) is not None
 
     def _serving_for(self, received_ns: int) -> Optional[Serving]:
         """Return the roadmap in force at ``received_ns``; call with the lock held."""
@@ -263,55 +326,37 @@ class PlanningWorker:
             self._previous = None  # no request needs it any more: free its memory
         return serving
 
-    def _await_table(self, serving: Serving, until: float) -> None:
-        """Wait, with the lock held, while the station table of ``serving`` is loading."""
-        while self._warming and self._serving is serving \
-                and self._table[0] != serving.loaded_ns and not self._stopping:
-            left = until - time.monotonic()
-            if left <= 0.0:
-                return
-            self.lock.wait(left)
-
     def _plan(self, number: int, request, received: float, received_ns: int) -> None:
-        """Answer one request, exactly once."""
+        """Answer one queued request, unless the watchdog has (then the plan is dropped)."""
         roadmap, begun, doing = None, None, 'planning'
         try:
             settings = self._settings()
             with self.lock:
                 serving = self._serving_for(received_ns)
-            if serving is None:
-                self.answer_error(number, request.request_id, ErrorCode.ROADMAP_NOT_READY,
-                                  'not ready: the roadmap is being loaded', request.start,
-                                  request.goal)
-                return
+                deadline = self._open.get(number, (None, received + settings.timeout))[1]
             planner, roadmap = serving.planner, serving.cached.roadmap
             joints = planner.cell.robot.joint_names
             angles = any(not isinstance(end, str) for end in (request.start, request.goal))
             if angles and request.read_for and tuple(request.read_for) != joints:
                 # Read for the cell that served at receipt, planned on another (a rebuild
                 # in between changed the joints): its angles would mean other joints.
-                self.answer_error(number, request.request_id, ErrorCode.JOINT_MISMATCH,
-                                  f'the request was read for joints {list(request.read_for)}, '
-                                  f'but the roadmap it is planned on has {list(joints)} (a '
-                                  'rebuild changed them): send it again', request.start,
-                                  request.goal, roadmap=roadmap)
+                self._answer_error(number, request, ErrorCode.JOINT_MISMATCH,
+                                   f'the request was read for joints {list(request.read_for)}, '
+                                   f'but the roadmap it is planned on has {list(joints)} (a '
+                                   'rebuild changed them): send it again', roadmap=roadmap)
                 return
             if planner.settings.sample_period != settings.sample_period:
                 planner = Planner(planner.cell, planner.roadmap,
                                   PlannerSettings(sample_period=settings.sample_period))
             with self.lock:
-                if isinstance(request.start, str) and isinstance(request.goal, str):
-                    self._await_table(serving, received + TABLE_WAIT * settings.timeout)
                 loaded_ns, table = self._table
             begun = time.monotonic()
             table = table if loaded_ns == serving.loaded_ns else None
             try:
-                result = plan_request(planner, table, request, settings,
-                                      received + settings.timeout)
+                result = plan_request(planner, table, request, settings, deadline)
             except PlanningError as exc:
-                self.answer_error(number, request.request_id, exc.code, exc.message,
-                                  request.start, request.goal,
-                                  (time.monotonic() - begun) * 1000.0, roadmap)
+                self._answer_error(number, request, exc.code, exc.message,
+                                   (time.monotonic() - begun) * 1000.0, roadmap)
                 return
             doing, stamp = 'answering', self._stamp()
             # The trajectory and its result go together (the node records both, then
@@ -319,10 +364,14 @@ class PlanningWorker:
             answer = messages.plan_answer(result, request, roadmap, joints, stamp,
                                           (time.monotonic() - received) * 1000.0)
         except Exception as exc:  # noqa: B902 - every request gets its one answer
-            self.answer_internal(number, request.request_id, exc, doing, request.start,
-                                 request.goal,
-                                 None if begun is None else (time.monotonic() - begun) * 1e3,
-                                 roadmap)
+            if self._claim(number):
+                self.answer_internal(number, request.request_id, exc, doing, request.start,
+                                     request.goal, None if begun is None
+                                     else (time.monotonic() - begun) * 1e3, roadmap)
+            return
+        if not self._claim(number):
+            self._logger.info(f'request {request.request_id or "(no id)"}: planned after it '
+                              'was answered TIMEOUT; not sent')
             return
         self._send((Sent.ANSWER, answer, number))
         with self.lock:
@@ -333,6 +382,13 @@ class PlanningWorker:
             self._logger.error(f'request {request.request_id}: no path markers: {reason_of(exc)}')
             return
         self._send((Sent.PATH, path, number))
+
+    def _answer_error(self, number: int, request, code, message: str, planning_ms=None,
+                      roadmap=None) -> None:
+        """Send the error answer of a queued query, unless it was answered already."""
+        if self._claim(number):
+            self.answer_error(number, request.request_id, code, message, request.start,
+                              request.goal, planning_ms, roadmap)
 
     # ----------------------------------------------------------------- loading
 
@@ -349,8 +405,6 @@ class PlanningWorker:
     def _load_roadmap(self) -> None:
         settings = self._settings()
         started = time.monotonic()
-        if self._own_process:
-            numba_cache(settings.cache_dir)
         try:
             cell_text = read_cell_file(settings.cell_file)  # the very text that is recorded
             cell = Cell.from_text(cell_text, str(settings.cell_file))
@@ -369,9 +423,20 @@ class PlanningWorker:
                                    settings.cache_dir, progress_reporter(self._logger))
             planner = Planner(cell, cached.roadmap,
                               PlannerSettings(sample_period=settings.sample_period))
+            # Ready means able to answer: the kernels (loading since the process started)
+            # and the cached station table first.
+            kernels_ready(self._logger, self._kernels_compiling)
         except Exception as exc:  # noqa: B902 - the node stays up and says why
             self._load_failed(exc)
             return
+        finally:
+            with self.lock:
+                self._compiling = False
+        table = None
+        try:
+            table = load_station_table(planner, settings, self._logger)
+        except Exception as exc:  # noqa: B902 - the roadmap serves without its table
+            self._logger.error(f'station table not loaded: {reason_of(exc)}')
         roadmap = cached.roadmap
         # Everything loaded so far lives as long as the node: keep it out of the garbage
         # collector's full passes, which otherwise pause every thread for tens of ms.
@@ -395,14 +460,16 @@ class PlanningWorker:
                 self._pending_ns = None  # first: planning waits while it is set
                 self._previous = self._serving
                 self._serving = Serving(planner, cached, loaded_ns)
+                self._table = (loaded_ns, table)
+                self._planning_table = table is None and settings.station_table
                 self._loading_cell = None
                 self.load_failed, self.last_load_error = False, ''
-                self._warming = True
                 self.lock.notify_all()
         self._logger.info(
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
-            f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s '
-            f'(ready {time.monotonic() - started:.2f} s after loading began'
+            f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s; station '
+            f'table {"of " + str(len(table)) + " pairs" if table is not None else "to plan"}'
+            f' (ready {time.monotonic() - started:.2f} s after loading began'
             f'{since_process_start()})')
         try:
             roadmap_markers = markers.roadmap_markers(cell, roadmap, settings.frame_id,
@@ -411,26 +478,6 @@ class PlanningWorker:
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
-        # The compiled kernels load (the first start after an install compiles them) while
-        # the roadmap serves: the cached station table first, which station requests wait
-        # for, then a plan of each method; then the table is planned if it was not cached.
-        table = None
-        with kernels_announced(self._logger):
-            try:
-                table = load_station_table(planner, settings, self._logger)
-            except Exception as exc:  # noqa: B902 - the roadmap serves without its table
-                self._logger.error(f'station table not loaded: {reason_of(exc)}')
-            with self.lock:
-                self._table = (loaded_ns, table)
-                self._planning_table = table is None and settings.station_table
-                self.lock.notify_all()
-            try:
-                warm_up(planner)
-            except Exception as exc:  # noqa: B902 - the kernels then load with a request
-                self._logger.error(f'warm-up failed: {reason_of(exc)}')
-            finally:
-                with self.lock:
-                    self._warming = False
         if table is not None or not settings.station_table:
             return
         try:
@@ -439,6 +486,11 @@ class PlanningWorker:
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         with self.lock:
             self._table, self._planning_table = (loaded_ns, table), False
+
+    def _kernels_compiling(self) -> None:
+        """Say, in the status and to requests, that the kernels are being compiled."""
+        with self.lock:
+            self._compiling = True
 
     def _load_failed(self, exc: Exception, cell_file=None) -> None:
         """Say why the load failed; the serving roadmap, if any, serves on."""

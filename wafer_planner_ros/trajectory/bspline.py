@@ -121,8 +121,10 @@ def states(control_points: np.ndarray, intervals: np.ndarray, span, fraction) ->
     """Return q, q', q'', q''' (K, 4, 3) at ``fraction`` of each ``span``."""
     span = np.asarray(span, np.int64)
     padded, windows = padded_windows(np.asarray(intervals, float), span)
-    return _states_many(padded, windows, np.asarray(control_points, float), span,
-                        np.asarray(fraction, float))
+    # Contiguous arrays, as the kernel was compiled for (a reversed view would compile it
+    # again for strided arrays).
+    return _states_many(padded, windows, np.ascontiguousarray(control_points, float), span,
+                        np.ascontiguousarray(fraction, float))
 
 
 _FALLING = np.array([[factorial(j) / factorial(j - order) if j >= order else 0.0
@@ -156,7 +158,7 @@ class CubicBSpline(Trajectory):
     @classmethod
     def from_intervals(cls, control_points: np.ndarray, intervals: np.ndarray):
         """Return the spline whose spans last ``intervals`` (s); needs len(cp) - 3 of them."""
-        control_points = np.asarray(control_points, float)
+        control_points = np.ascontiguousarray(control_points, float)
         intervals = np.ascontiguousarray(intervals, float)
         if len(intervals) != len(control_points) - DEGREE:
             raise ValueError(f'{len(control_points)} control points need '
