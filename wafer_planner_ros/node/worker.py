@@ -29,6 +29,7 @@ import threading
 import time
 from typing import Callable, Optional
 
+from wafer_planner_ros import kernels
 from wafer_planner_ros.cell.document import read_cell_file
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError, WaferPlannerError
@@ -227,6 +228,7 @@ class PlanningWorker:
                 'rebuild_failed': self.load_failed,
                 'last_rebuild_error': self.last_load_error,
                 'station_table': held_pairs(self._table, serving),
+                'kernels_compiled': kernels.compiled_count(),
             }
 
     def request_stop(self) -> None:
