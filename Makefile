@@ -32,7 +32,7 @@ kernels: $(STAMP)
 	@$(ENV) $(PY) -m wafer_planner_ros.cli.kernels
 
 run: kernels
-	$(ENV) $(PY) -m wafer_planner_ros.node.planner_node --ros-args \
+	$(ENV) $(PY) -m wafer_planner_ros.node.main --ros-args \
 		--params-file config/wafer_planner.yaml $(RUN_ARGS)
 
 test: $(STAMP)

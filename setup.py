@@ -32,7 +32,7 @@ setup(
             'wafer-recover = wafer_planner_ros.cli.recover:entry_point',
             'wafer-replay = wafer_planner_ros.cli.replay:entry_point',
             'wafer-review = wafer_planner_ros.cli.review:entry_point',
-            'wafer_planner_node = wafer_planner_ros.node.planner_node:entry_point',
+            'wafer_planner_node = wafer_planner_ros.node.main:entry_point',
         ],
     },
 )

@@ -1,0 +1,21 @@
+"""
+``wafer_planner_node``: the node's process, the compiled kernels loading from its first moment.
+
+Loading the kernels from numba's cache (about 0.7 s) takes longer than the rest of the
+start-up (imports, ROS, the roadmap from its cache); they are started here, before the
+node's own imports, in a thread of their own (``startup.load_kernels``), and the node is
+ready when both are done.
+"""
+
+from wafer_planner_ros.node import startup
+
+
+def entry_point() -> None:
+    """Console script ``wafer_planner_node`` (and ``python -m wafer_planner_ros.node.main``)."""
+    startup.load_kernels()
+    from wafer_planner_ros.node import planner_node  # ROS and the node, meanwhile
+    planner_node.entry_point()
+
+
+if __name__ == '__main__':
+    entry_point()
