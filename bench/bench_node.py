@@ -3,10 +3,8 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
 
 0. The station table at a cold start (an empty cache directory): how long after the
    roadmap serves it is planned, before anything is measured; then, in process, how long
-   loading it from the cache takes. The compiled kernels come from numba's cache under the
-   default cache directory (``NUMBA_CACHE_DIR``, filled by any earlier start), as on a
-   machine that has run the node before: ``bench_startup.py`` measures the first start
-   after an install, which compiles them.
+   loading it from the cache takes. The compiled kernels come from numba's cache, where
+   the set-up put them (``wafer-kernels``, which ``make bench`` runs first).
 1. End-to-end latency, one request at a time (every directed station pair three times,
    answered from the table, and 200 random free joint requests, optimised within
    ``planning.optimise_budget``): request publish to result receipt, against the planning
@@ -16,10 +14,14 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
    over requests of (on - off) for the same request. The joint requests' cycle times are
    compared with the unbudgeted whole-curve optimisation of the same pairs (in process,
    after the node has stopped).
-2. A burst of 200 station requests from 4 publishers at once, recording on: every result
+2. Mixed load: joint requests back to back (each sent when the one before is answered, so
+   the planning thread is always busy) while station requests arrive every 50 ms from
+   another publisher: the station requests' end-to-end latency (answered from the table
+   by a thread of their own, never behind the joint planning) and every code.
+3. A burst of 200 station requests from 4 publishers at once, recording on: every result
    received, none lost or duplicated, how many were BUSY, ``~/get_status`` round trips
    throughout, and every request and result in the recording.
-3. The node's resident memory.
+4. The node's resident memory.
 Prints a table; writes ``bench/results/node.json``. Usage: ``make bench`` or
 ``python bench/bench_node.py [--joints N]``.
 """
@@ -52,13 +54,15 @@ from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.node.planner_node import RELIABLE
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.reading import read
-from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
+from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service.table import load_table
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'node.json'
 BURST, PUBLISHERS = 200, 4
 BLOCK = 12
 """Requests asked in one go with recording on, then off (or off, then on)."""
+MIXED_STATIONS, MIXED_PERIOD = 120, 0.05
+"""Station requests of the mixed load, and the seconds between them."""
 
 
 class Peer(Node):
@@ -122,12 +126,11 @@ def main() -> int:
     args = parser.parse_args()
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_DOMAIN_ID=str(150 + os.getpid() % 50))
-    env.setdefault('NUMBA_CACHE_DIR', str(DEFAULT_CACHE_DIR / 'numba'))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                       ROS_DOMAIN_ID=env['ROS_DOMAIN_ID'])
     recordings = tempfile.mkdtemp(prefix='bench_recordings_')
     cache = tempfile.mkdtemp(prefix='bench_cache_')  # a cold start: roadmap and table
-    node = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.planner_node',
+    node = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.main',
                              '--ros-args', '-p', 'planning.timeout:=60.0',
                              '-p', f'planning.max_queue:={BURST + 10}',
                              '-p', f'roadmap.cache_dir:={cache}',
@@ -177,6 +180,13 @@ def main() -> int:
           f"(p99 {e2e['overhead_ms']['p99']:.2f}): in the node "
           f"{e2e['in_node_overhead_ms']['median']:.2f}, transport and peer "
           f"{e2e['transport_ms']['median']:.2f}")
+    mixed = report['mixed']
+    print(f"mixed load: {mixed['station_requests']} station requests every "
+          f"{MIXED_PERIOD * 1000:.0f} ms while {mixed['joint_requests_answered']} joint "
+          f"requests were planned back to back: end-to-end median "
+          f"{mixed['station_e2e_ms']['median']:.1f} ms, p99 {mixed['station_e2e_ms']['p99']:.1f}"
+          f", max {mixed['station_e2e_ms']['max']:.1f}; codes {mixed['station_codes']} "
+          f"(joint {mixed['joint_codes']})")
     print(f"burst: {burst['received']}/{burst['sent']} results ({burst['ok']} ok, "
           f"{burst['busy']} BUSY), {burst['duplicates']} duplicates, in {burst['seconds']:.1f}"
           f" s; get_status {burst['status_ms']['n']} calls: median "
@@ -242,6 +252,7 @@ def run(peer: Peer, cell, joints) -> dict:
     recording = {'on': on, 'off': off, 'asked_in_each_mode': 2, 'block': BLOCK,
                  'paired_e2e_difference_ms': _paired(passes, 'e2e'),
                  'paired_overhead_difference_ms': _paired(passes, 'overhead')}
+    mixed = _mixed(peer, pairs, joints)
     burst_bag = peer.set_recording(True).split('recording to ', 1)[1]  # a bag of its own
     # The burst: 4 publishers at once, get_status polled throughout.
     ids = [[f'b{p}-{k}' for k in range(BURST // PUBLISHERS)] for p in range(PUBLISHERS)]
@@ -286,7 +297,45 @@ def run(peer: Peer, cell, joints) -> dict:
     return {'benchmark': 'wafer_planner_node over DDS on loopback, default cell',
             'station_table_seconds': table_seconds, 'sequential': sequential,
             'joint_cycles': warm['cycle'],
-            'recording': recording, 'burst': burst, 'burst_bag': burst_bag}
+            'recording': recording, 'mixed': mixed, 'burst': burst, 'burst_bag': burst_bag}
+
+
+def _mixed(peer: Peer, pairs, joints) -> dict:
+    """Station requests every ``MIXED_PERIOD`` s while joint requests keep the planner busy."""
+    done, joint_codes = threading.Event(), []
+
+    def plan_joints() -> None:
+        for k, (a, b) in enumerate(joints * 10):
+            if done.is_set():
+                return
+            msg = JointTrajectory()
+            msg.header.frame_id = f'mixed-j{k}'
+            msg.points = [JointTrajectoryPoint(positions=a.tolist()),
+                          JointTrajectoryPoint(positions=b.tolist())]
+            peer.joints.publish(msg)
+            joint_codes.append(peer.wait(msg.header.frame_id)[1]['code'])
+
+    planning = threading.Thread(target=plan_joints)
+    planning.start()
+    time.sleep(0.5)
+    sent = {}
+    for k in range(MIXED_STATIONS):
+        a, b = pairs[k % len(pairs)]
+        sent[f'mixed-s{k}'] = time.perf_counter()
+        peer.stations[1].publish(String(data=json.dumps({'id': f'mixed-s{k}', 'from': a,
+                                                         'to': b})))
+        time.sleep(MIXED_PERIOD)
+    answers = {i: peer.wait(i) for i in sent}
+    done.set()
+    planning.join()
+    codes = [values['code'] for _, values in answers.values()]
+    return {'station_requests': len(sent), 'station_e2e_ms': _stats(np.array(
+                [(answers[i][0] - sent[i]) * 1000.0 for i in sent])),
+            'station_codes': {c: codes.count(c) for c in sorted(set(codes))},
+            'station_sources': sorted({values.get('source', '') for _, values
+                                       in answers.values()}),
+            'joint_requests_answered': len(joint_codes),
+            'joint_codes': {c: joint_codes.count(c) for c in sorted(set(joint_codes))}}
 
 
 def _status(peer: Peer) -> dict:
