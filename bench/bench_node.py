@@ -183,7 +183,7 @@ def main() -> int:
     mixed = report['mixed']
     print(f"mixed load: {mixed['station_requests']} station requests every "
           f"{MIXED_PERIOD * 1000:.0f} ms while {mixed['joint_requests_answered']} joint "
-          f"requests were planned back to back: end-to-end median "
+          'requests were planned back to back: end-to-end median '
           f"{mixed['station_e2e_ms']['median']:.1f} ms, p99 {mixed['station_e2e_ms']['p99']:.1f}"
           f", max {mixed['station_e2e_ms']['max']:.1f}; codes {mixed['station_codes']} "
           f"(joint {mixed['joint_codes']})")

@@ -184,7 +184,7 @@ def main() -> int:
         'without_the_setup_compile': unset,
     }
     print(f"\nwarm cache, {len(warm)} starts (median): ready {results['ready_median_s']:.3f} "
-          f"s after the process started (target 1.0 s); first station answer "
+          's after the process started (target 1.0 s); first station answer '
           f"{results['first_station_node_ms_median']:.1f} ms, first joint answer "
           f"{results['first_joint_node_ms_median']:.1f} ms in the node; exit after SIGINT at "
           f"most {results['exit_after_sigint_max_s']:.2f} s")
