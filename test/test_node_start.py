@@ -89,7 +89,7 @@ def _ask(env, start: str, goal: str, request_id: str) -> dict:
 
 
 def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends_it_at_once(
-        dds_env, tmp_path, default_roadmap):
+        dds_env, tmp_path):
     # A new roadmap.cache_dir: the roadmap is built and the station table planned after
     # 'ready:', as on the first start of an install (the kernels come from the set-up).
     node = _Node(dds_env, tmp_path / 'cache', tmp_path / 'recordings')
@@ -102,6 +102,12 @@ def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends
             # Answered within the packaged planning.timeout of its receipt.
             assert float(values['node_ms']) < DEFAULT_TIMEOUT * 1000.0, values
             assert values['certified'] == 'True'
+        # The roadmap was built, both methods planned, the table is being planned: all on
+        # kernels the set-up compiled, none compiled by the node.
+        status = json.loads(subprocess.run(
+            [sys.executable, '-c', _STATUS], env=dds_env, capture_output=True, text=True,
+            timeout=120).stdout)
+        assert status['kernels_compiled'] == 0, status
         # The station table is still being planned (seconds per pair): stop the node now.
         node.wait_for('station table: 1/', 120.0)
         seconds = node.stop(signal.SIGTERM)
@@ -113,27 +119,6 @@ def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends
     recording, = (tmp_path / 'recordings').iterdir()
     results = read_with_rosbags(recording)['/wafer_planner/result']
     assert sorted(r.name for r in results) == ['first-joint', 'first-station']
-
-
-def test_a_node_with_cached_kernels_compiles_none_and_answers_at_once_when_ready(
-        dds_env, tmp_path, roadmap_cache, default_roadmap):
-    cache = tmp_path / 'cache'
-    cache.mkdir()
-    for path in roadmap_cache.glob('roadmap-*.npz'):  # the roadmap cached, as on a warm start
-        (cache / path.name).symlink_to(path)
-    node = _Node(dds_env, cache, tmp_path / 'recordings')
-    try:
-        node.wait_for('ready: ', 120.0)
-        joint = _ask(dds_env, '-2.4303,-1.5807,-0.7014', 'loadlock1', 'warm-joint')
-        assert joint['code'] == 'OK', joint
-        status = json.loads(subprocess.run(
-            [sys.executable, '-c', _STATUS], env=dds_env, capture_output=True, text=True,
-            timeout=120).stdout)
-        assert status['kernels_compiled'] == 0, status
-        node.stop(signal.SIGINT)
-    finally:
-        node.process.kill()
-    assert 'compiling the planning kernels' not in ''.join(node.log)
 
 
 _STATUS = """

@@ -3,7 +3,8 @@ The node's planning worker: planning, table-answering, watchdog and loading thre
 
 The planning thread plans one request at a time. Requests wait in a bounded backlog
 (``planning.max_queue``; beyond it the answer is ``BUSY``). A station pair that the station
-table holds never waits behind planning: the answering thread gives it at once. Every
+table holds never waits behind planning: the answering thread gives it at once (from a
+queue of its own, as long). Every
 queued request is answered by ``planning.timeout`` seconds after its receipt: the watchdog
 thread answers ``TIMEOUT`` at that instant for one not answered yet (waiting or still being
 planned), and a plan finished later is dropped, never sent. The loading thread loads the
@@ -130,17 +131,17 @@ class PlanningWorker:
             settings = self._settings()
             with self.lock:
                 serving = self._serving
-                if serving is None:
+                waiting = None if serving is None else \
+                    self._lane if self._held(serving, request) else self._backlog
+                if waiting is None:
                     code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {self._not_ready()}'
-                elif not self._held(serving, request) \
-                        and len(self._backlog) >= settings.max_queue:
+                elif len(waiting) >= settings.max_queue:
                     code = ErrorCode.BUSY
                     message = (f'busy: {settings.max_queue} requests are already waiting '
                                '(planning.max_queue)')
                 else:
-                    item = (number, request, received,
-                            time.time_ns() if received_ns is None else received_ns)
-                    (self._lane if self._held(serving, request) else self._backlog).append(item)
+                    waiting.append((number, request, received,
+                                    time.time_ns() if received_ns is None else received_ns))
                     deadline = received + settings.timeout
                     self._open[number] = (request, deadline, settings.timeout)
                     heapq.heappush(self._deadlines, (deadline, number))
