@@ -33,7 +33,7 @@ def test_certified_segments_are_collision_free_when_checked_densely_with_fcl(cel
 
 def test_straight_lines_between_loadports_and_loadlocks_collide_and_are_refused(
         default_cell):
-    # SPEC 2: on the default cell every such line collides, so the roadmap is needed.
+    # On the default cell every such line collides, so the roadmap is needed.
     model, stations = default_cell.clearance_model, default_cell.stations
     qa, qb = [], []
     for port in ('loadport1', 'loadport2', 'loadport3'):

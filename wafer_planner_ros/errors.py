@@ -4,7 +4,7 @@ import enum
 
 
 class ErrorCode(str, enum.Enum):
-    """The error codes of a failed request (SPEC section 3)."""
+    """The error codes of a failed request."""
 
     INVALID_REQUEST = 'INVALID_REQUEST'
     UNKNOWN_STATION = 'UNKNOWN_STATION'

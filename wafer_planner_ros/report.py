@@ -1,10 +1,10 @@
-"""Plain-data (JSON) form of plan results and errors, shared by the tools (SPEC section 4)."""
+"""Plain-data (JSON) form of plan results and errors, shared by the tools."""
 
 import numpy as np
 
 
 def plan_json(result, roadmap_info: dict, joint_names) -> dict:
-    """Return a successful plan as the SPEC's JSON object."""
+    """Return a successful plan as the tools' JSON object (README, "Command-line tools")."""
     points = [{'t': float(t), 'q': q.tolist(), 'qd': qd.tolist(), 'qdd': qdd.tolist()}
               for t, q, qd, qdd in zip(result.times, result.positions, result.velocities,
                                        result.accelerations)]
@@ -37,7 +37,7 @@ def measured(result) -> dict:
 
 
 def error_json(code: str, message: str, start, goal, roadmap_info: dict) -> dict:
-    """Return a failed request as the SPEC's JSON object."""
+    """Return a failed request as the tools' JSON object (README, "Command-line tools")."""
     return {'status': 'error', 'code': code, 'message': message, 'from': _label(start),
             'to': _label(goal), 'roadmap': roadmap_info}
 

@@ -22,8 +22,9 @@ from trajectory_msgs.msg import JointTrajectory
 from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.node.planner_node import RELIABLE
 
-DISCOVERY = 3.0
-"""s within which a running node is found on the same domain (about 0.1 s on loopback)."""
+DISCOVERY = 10.0
+"""s within which discovery finds a running node on the same domain (about 0.1 s on an
+idle machine's loopback; the margin is for a loaded one)."""
 
 
 class NoPlannerNode(WaferPlannerError):
@@ -86,8 +87,10 @@ class PlannerPeer(Node):
             return {}
 
     def _found(self) -> bool:
-        """Return whether discovery knows a node of the planner's name."""
-        return any(f"{namespace.rstrip('/')}/{name}" == self.planner
+        """Return whether discovery knows the planner: its node, its status service or result."""
+        return self.status.service_is_ready() \
+            or self.count_publishers(f'{self.planner}/result') > 0 \
+            or any(f"{namespace.rstrip('/')}/{name}" == self.planner
                    for name, namespace in self.get_node_names_and_namespaces())
 
 

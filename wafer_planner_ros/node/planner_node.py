@@ -1,5 +1,5 @@
 """
-The planning node ``wafer_planner`` (SPEC section 5): a thin ROS edge around the core.
+The planning node ``wafer_planner``: a thin ROS edge around the core.
 
 Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
 publishing: every callback is short), the worker's two (``worker``: one plans, one request

@@ -1,5 +1,5 @@
 """
-What the node records, and when (SPEC section 6): the node's side of a ``Recorder``.
+What the node records, and when (README, "Recording"): the node's side of a ``Recorder``.
 
 A query is recorded as one group when its answer goes out: its request as received (raw
 bytes, log time = receipt, held until then), its trajectory and its result as published

@@ -1,1 +1,1 @@
-"""Recording queries to MCAP in the rosbag2 layout, and reading them back (SPEC section 6)."""
+"""Recording queries to MCAP in the rosbag2 layout, and reading them back."""

@@ -1,5 +1,5 @@
 """
-A rosbag2-layout MCAP bag, written one record at a time, split into files (SPEC section 6).
+A rosbag2-layout MCAP bag, written one record at a time, split into files.
 
 The layout is what ``ros2 bag record -s mcap`` writes on Jazzy, so that ``ros2 bag``,
 Foxglove and the independent ``rosbags`` library read it: a directory ``<bag>/`` holding

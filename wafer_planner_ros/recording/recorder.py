@@ -1,5 +1,5 @@
 """
-The recorder: one ``BagWriter``, a lock, and a thread for the slow work (SPEC section 6).
+The recorder: one ``BagWriter``, a lock, and a thread for the slow work.
 
 Two ways in, one file order:
 

@@ -1,5 +1,5 @@
 """
-Certified shortcuts of a roadmap path (**beyond** the paper; SPEC section 3.5).
+Certified shortcuts of a roadmap path (beyond the paper).
 
 A roadmap path zig-zags, and every corner costs time: the spline must turn inside the
 corner's small safe box. Every pair of path vertices is tried as a straight segment at once

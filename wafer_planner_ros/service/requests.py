@@ -4,7 +4,7 @@ Plan requests as the node receives them, read into plain values (ROS-free).
 A joint request is a JointTrajectory (``header.frame_id`` = id, two points, positions in
 ``joint_names`` order or the robot's when the names are empty); a station request is a JSON
 object ``{"id": "r17", "from": "loadport2", "to": "loadlock1"}`` (no other keys) whose ends
-may also be three joint angles. Anything else raises ``RequestError`` with the SPEC code and
+may also be three joint angles. Anything else raises ``RequestError`` with the error code and
 a sentence naming what is wrong, never longer than a few hundred characters whatever the
 request holds: every number is checked to be one a float holds (``NOT_FINITE`` otherwise,
 naming the field), and the JSON reader itself can only fail with ``INVALID_REQUEST``. The

@@ -1,5 +1,5 @@
 """
-The node's parameters (SPEC section 5): names, defaults, ranges, meaning, and validation.
+The node's parameters: names, defaults, ranges, meaning, and validation.
 
 ROS-free: the node declares its parameters from ``PARAMETERS`` and turns their values into
 one frozen ``NodeSettings`` with ``settings_from``; a bad value raises ``ValueError`` naming
