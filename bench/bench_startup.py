@@ -39,6 +39,8 @@ import time
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / 'bench' / 'results' / 'startup.json'
 BIN = Path(sys.executable).parent
+READY_LINE = '[wafer_planner]: ready: '
+"""The node's readiness line (not 'station table ready: ', logged before it)."""
 READY = re.compile(r'ready: .*, (\d+\.\d+) s after the process started')
 STATION, JOINT = ('loadport1', 'loadlock2'), ('-1.2,2.4,1.3', '1.0,-2.0,-1.0')
 
@@ -111,7 +113,7 @@ def environment(numba_cache: str = '') -> dict:
 
 def ready_and_first_answers(node: Started, timeout: float) -> dict:
     """Wait for ``ready:``; ask the first station and joint requests; return the figures."""
-    seen, line = node.wait_for('ready: ', timeout)
+    seen, line = node.wait_for(READY_LINE, timeout)
     found = {'ready': float(READY.search(line).group(1)), 'seen': seen}
     found['station'] = node.ask(*STATION)
     found['joint'] = node.ask(*JOINT)
@@ -156,13 +158,13 @@ def main() -> int:
                    capture_output=True)
     install = {'wafer_kernels_s': time.monotonic() - begun}
     node = Started(environment(empty), cache, recordings)
-    install['ready_after'] = float(READY.search(node.wait_for('ready: ', 120.0)[1]).group(1))
+    install['ready_after'] = float(READY.search(node.wait_for(READY_LINE, 120.0)[1]).group(1))
     node.stop(signal.SIGINT)
     node = Started(environment(tempfile.mkdtemp(prefix='bench_startup_numba_')), cache,
                    recordings)
     unset = {'announced': node.wait_for('compiling the planning kernels for this machine',
                                         300.0)[0]}
-    unset['ready'] = float(READY.search(node.wait_for('ready: ', 600.0)[1]).group(1))
+    unset['ready'] = float(READY.search(node.wait_for(READY_LINE, 600.0)[1]).group(1))
     node.stop(signal.SIGINT)
     print(f"after an install: wafer-kernels {install['wafer_kernels_s']:.1f} s, then ready "
           f"{install['ready_after']:.2f} s; without it the node announces the compile at "

@@ -94,7 +94,7 @@ def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends
     # 'ready:', as on the first start of an install (the kernels come from the set-up).
     node = _Node(dds_env, tmp_path / 'cache', tmp_path / 'recordings')
     try:
-        node.wait_for('ready: ', 240.0)
+        node.wait_for('[wafer_planner]: ready: ', 240.0)
         station = _ask(dds_env, 'loadport1', 'loadlock2', 'first-station')
         joint = _ask(dds_env, '-1.2,2.4,1.3', '1.0,-2.0,-1.0', 'first-joint')
         for values in (station, joint):
