@@ -7,15 +7,23 @@ import pytest
 from scipy.interpolate import BSpline
 
 from wafer_planner_ros.roadmap.search import find_path
+from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
-from wafer_planner_ros.trajectory.corridor import build_corridor
+from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.timing import optimise
-from wafer_planner_ros.trajectory.timing_problem import TimingProblem
+from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import TimingSettings
-from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times
+from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times, LIMIT_ORDERS
+from wafer_planner_ros.trajectory.verify import limit_ratios, state_ratios, verify
 
 MARGIN = TimingSettings().margin
 """The optimiser's tightening of the limits (its default tuning)."""
+
+PEAK_BETWEEN_SAMPLES = (
+    np.array([-1.1700711684872604, 2.423652420735181, 1.3388026000994313]),
+    np.array([-1.7122484869689896, -2.949758921692892, -2.7240628830999567]))
+"""A free joint pair of the default cell whose λ-scaled start (λ = 34) exceeded the wafer
+limit by 0.02 % between the instants its λ was taken from, 34 ms apart once scaled."""
 
 
 @pytest.fixture()
@@ -159,3 +167,53 @@ def test_lambda_start_is_feasible_and_the_optimum_is_faster(default_cell, defaul
         assert np.all(np.abs(acceleration) <= limits.acceleration + 1e-12)
         assert problem.dense_wafer_ratio(intervals)[0].max() <= MARGIN * (1 + 2e-4)
     assert timing.intervals.sum() < timing.initial_intervals.sum()
+
+
+def _planner_corridor(cell, roadmap, start, goal):
+    """Return the corridor the planner builds between two configurations (its defaults)."""
+    model, lipschitz = cell.clearance_model, cell.robot.lipschitz
+    path = shortcut(simplify(find_path(roadmap, model, lipschitz, start, goal).path), model,
+                    lipschitz)
+    return build_corridor(path, model.body_clearance(path), lipschitz)
+
+
+def test_the_lambda_scaled_start_meets_every_limit_where_verification_checks(
+        default_cell, default_roadmap):
+    start, goal = PEAK_BETWEEN_SAMPLES
+    corridor = _planner_corridor(default_cell, default_roadmap, start, goal)
+    problem = TimingProblem(corridor.control_points, default_cell.robot)
+    intervals, scale = scaled_start(problem)
+    assert scale > 30.0
+    checked = verify(CubicBSpline.from_intervals(problem.points, intervals), default_cell,
+                     start, goal)
+    assert checked.ok, checked.problems
+    assert max(checked.ratios.values()) <= 1.0
+
+
+def test_each_limit_ratio_scales_with_its_order_in_time(default_cell, spline):
+    robot = replace(default_cell.robot, wafer_acceleration_norm_limit=3.0)  # every limit
+    assert set(limit_ratios(spline, robot)) == set(LIMIT_ORDERS)
+    slower = 1.7
+    slowed = CubicBSpline.from_intervals(spline.control_points, slower * spline.intervals)
+    # The same instants of both curves (none on a knot, where the jerk steps).
+    t = np.random.default_rng(74).uniform(0.0, spline.duration, 500)
+    ratios = [state_ratios(robot, *states[1:], robot.arm.wafer_acceleration(*states[:3]))
+              for states in (spline.evaluate_orders(t, range(4)),
+                             slowed.evaluate_orders(slower * t, range(4)))]
+    for name, order in LIMIT_ORDERS.items():
+        assert ratios[1][name] == pytest.approx(ratios[0][name] / slower ** order, rel=1e-9)
+
+
+def test_a_timing_over_the_limits_is_slowed_just_enough_to_meet_them(default_cell, spline):
+    robot = default_cell.robot
+    problem = TimingProblem(spline.control_points, robot)
+    assert max(limit_ratios(spline, robot).values()) > 1.0
+    intervals, factor = problem.meet_limits(spline.intervals)
+    assert factor > 1.0 and np.array_equal(intervals, factor * spline.intervals)
+    ratios = limit_ratios(CubicBSpline.from_intervals(spline.control_points, intervals), robot)
+    # Met, and no slower than needed: the largest ratio comes to the margin (up to where
+    # the check's instants fall on the slowed curve).
+    assert MARGIN - 1e-3 < max(ratios.values()) <= 1.0
+    # A timing that meets them is returned as it is.
+    again, unchanged = problem.meet_limits(intervals)
+    assert unchanged == 1.0 and np.array_equal(again, intervals)

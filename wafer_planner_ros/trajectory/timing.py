@@ -18,18 +18,20 @@ Variables: the durations h of the spline's spans. Objective: the total time sum(
   (``TimingSettings.shortest``).
 
 The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ computed from a
-dense sample of the wafer acceleration so that it is feasible everywhere; SLSQP then solves
-with exact gradients (compiled, ``rows``): the control-point rows are Eq. 6-7
-differentiated in closed form; a wafer sample in span s depends on h_{s-2}..h_{s+2} only,
-and its derivatives come by the complex step on the spline's basis (every function is
-analytic, so ``Im B(h + i ε e_k) / ε`` is dB/dh_k to machine precision — there is no
-difference to cancel, unlike finite differences) through the kinematics' closed-form
-partials.
+dense sample of the wafer acceleration, and slowed further where it still exceeds a limit
+at the verification's own times (``TimingProblem.meet_limits``), so that it is feasible
+everywhere; SLSQP then solves with exact gradients (compiled, ``rows``): the control-point
+rows are Eq. 6-7 differentiated in closed form; a wafer sample in span s depends on
+h_{s-2}..h_{s+2} only, and its derivatives come by the complex step on the spline's basis
+(every function is analytic, so ``Im B(h + i ε e_k) / ε`` is dB/dh_k to machine precision
+— there is no difference to cancel, unlike finite differences) through the kinematics'
+closed-form partials.
 
 **Beyond the paper**: sampling the wafer acceleration at the knots lets it exceed the limit
 between them. Every answer of the solver is therefore checked densely (every ``dense_step``
 seconds, and every control point) and scaled by its own λ of Eq. 12, which makes it
-feasible everywhere; if that scaling slows it by more than ``rescale_tolerance``, the local
+feasible everywhere (one that would be the fastest so far is checked as the start is,
+``meet_limits``); if that scaling slows it by more than ``rescale_tolerance``, the local
 peaks over the limit become new samples and the problem is solved again (at most
 ``max_rounds`` times). The fastest feasible answer is kept; only when the solver produced
 nothing usable is the λ-scaled start returned, with the reason.
@@ -87,7 +89,8 @@ def optimise(problem: TimingProblem, start=None, give_up_above=None) -> Optional
         ratio, dense_span, dense_fraction = problem.dense_wafer_ratio(intervals)
         rescale = problem.scale_factor(intervals, ratio.max())
         if rescale * intervals.sum() < best.sum():
-            best = rescale * intervals
+            scaled = problem.meet_limits(rescale * intervals)[0]
+            best = scaled if scaled.sum() < best.sum() else best
         if rescale <= 1.0 + tuning.rescale_tolerance:
             return Timing(best, start, scale, True, iterations, rounds, len(span))
         # Between samples the limit was exceeded: sample the peaks and solve again.

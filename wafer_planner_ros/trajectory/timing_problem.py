@@ -15,6 +15,7 @@ from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, derivativ
 from wafer_planner_ros.trajectory.bspline import knots_from_intervals, padded_windows, WINDOW
 from wafer_planner_ros.trajectory.rows import control_row_count, control_rows, sample_rows
 from wafer_planner_ros.trajectory.tuning import TimingSettings
+from wafer_planner_ros.trajectory.verify import LIMIT_ORDERS, limit_ratios
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,7 +27,7 @@ class Timing:
     initial_intervals: np.ndarray
     """The λ-scaled start point (s)."""
     scale: float
-    """λ of Eq. 12."""
+    """λ of Eq. 12 (times the slowing that ``TimingProblem.meet_limits`` added)."""
     optimised: bool
     """False when the λ-scaled timing is returned instead (see ``message``)."""
     iterations: int
@@ -60,6 +61,7 @@ class TimingProblem:
         """s: the shortest span."""
         self.points = np.asarray(control_points, float)
         self.spans = len(self.points) - DEGREE
+        self.robot = robot
         self.arm = robot.arm
         self.limits = robot.limits
         self.wafer = robot.wafer_acceleration_limit
@@ -172,6 +174,30 @@ class TimingProblem:
         ratios.append(np.sqrt(float(wafer_ratio) / self.settings.margin))
         return max(ratios)
 
+    def meet_limits(self, intervals: np.ndarray) -> tuple:
+        """
+        Return (intervals, factor): the timing slowed by ``factor`` >= 1 to meet every limit.
+
+        The limits are checked on the curve itself, at the verification's own times and by
+        its own ratios (``verify.limit_ratios``): Eq. 12 takes the wafer acceleration at
+        dense instants of the timing before it is scaled, λ times as far apart once it is,
+        and a peak between them can exceed the limit (a start of λ = 34 by 0.02 %). Each
+        limit over 1 slows the curve so that its ratio, of order k in time
+        (``verify.LIMIT_ORDERS``), comes to ``margin``: by (ratio / margin) ** (1 / k);
+        the check is repeated, ``limit_tries`` times at most (the last slowing is then
+        returned unchecked; verification reports whatever it still exceeds).
+        """
+        timed, factor = np.asarray(intervals, float), 1.0
+        for _ in range(self.settings.limit_tries):
+            ratios = limit_ratios(CubicBSpline.from_intervals(self.points, timed), self.robot)
+            values = np.array(list(ratios.values()))
+            if np.all(values <= 1.0) or not np.all(np.isfinite(values)):
+                return timed, factor
+            factor *= max((ratio / self.settings.margin) ** (1.0 / LIMIT_ORDERS[name])
+                          for name, ratio in ratios.items())
+            timed = factor * np.asarray(intervals, float)
+        return timed, factor
+
 
 def dense_grid(intervals: np.ndarray, step: float) -> tuple:
     """Return (span, fraction) of times at most ``step`` apart, including every knot."""
@@ -196,7 +222,14 @@ def initial_intervals(problem: TimingProblem) -> np.ndarray:
 
 
 def scaled_start(problem: TimingProblem) -> tuple:
-    """Return the paper's feasible start point (Eq. 12): (intervals, λ)."""
+    """
+    Return the paper's feasible start point (Eq. 12): (intervals, λ).
+
+    λ of Eq. 12, then slowed further where the curve still exceeds a limit at the
+    verification's times (``TimingProblem.meet_limits``): the start meets every limit
+    exactly as verification checks it.
+    """
     uniform = initial_intervals(problem)
     scale = problem.scale_factor(uniform)
-    return scale * uniform, scale
+    start, slower = problem.meet_limits(scale * uniform)
+    return start, scale * slower

@@ -24,6 +24,9 @@ class TimingSettings:
             else self.min_interval_without_jerk
     dense_step: float = 1e-3
     """s: the step of the dense check of every answer."""
+    limit_tries: int = 8
+    """Checks on the verification's own times at most in slowing a timing until it meets
+    every limit (``TimingProblem.meet_limits``); one slowing is almost always enough."""
     max_rounds: int = 4
     """Solves with added samples at most (8 gave cycles at most 0.55 % shorter on 108
     problems, at 1.4 x the time)."""

@@ -51,21 +51,8 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
     """Check a trajectory of ``cell``'s robot from start to goal."""
     robot = cell.robot
     limits = robot.limits
-    duration = trajectory.duration
-    t = np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
-    q, qd, qdd, qddd = trajectory.evaluate_orders(t, range(4))
-    wafer = robot.arm.wafer_acceleration(q, qd, qdd)
-    ratios = {
-        'velocity': _ratio(qd, limits.velocity),
-        'acceleration': _ratio(qdd, limits.acceleration),
-        'wafer_x': _ratio(wafer[:, 0], robot.wafer_acceleration_limit[0]),
-        'wafer_y': _ratio(wafer[:, 1], robot.wafer_acceleration_limit[1]),
-    }
-    if limits.jerk is not None:
-        ratios['jerk'] = _ratio(qddd, limits.jerk)
-    if robot.wafer_acceleration_norm_limit is not None:
-        ratios['wafer_norm'] = float(np.max(np.hypot(wafer[:, 0], wafer[:, 1]))
-                                     / robot.wafer_acceleration_norm_limit)
+    t, q, qd, qdd, qddd, wafer = limit_states(trajectory, robot)
+    ratios = state_ratios(robot, qd, qdd, qddd, wafer)
     # Written so that NaN fails: every comparison with NaN is false.
     problems = [f'{name} reaches {ratio:.4f} x its limit'
                 for name, ratio in ratios.items() if not ratio <= 1.0]
@@ -132,3 +119,48 @@ def collision_times(trajectory: Trajectory) -> np.ndarray:
     offsets = steps(counts)
     t = np.repeat(boundaries[:-1], counts) + offsets * np.repeat(lengths / counts, counts)
     return np.append(t, trajectory.duration)
+
+
+LIMIT_ORDERS = {'velocity': 1, 'acceleration': 2, 'jerk': 3, 'wafer_x': 2, 'wafer_y': 2,
+                'wafer_norm': 2}
+"""The order in time of each limit: the curve slowed by λ, q(t / λ), has its ratio divided
+by λ ** order (the wafer acceleration, J(q) q'' + (dJ/dt) q', by λ ** 2 like q'')."""
+
+
+def limit_times(duration: float) -> np.ndarray:
+    """Return the times of the limit check: 0 to ``duration``, at most LIMIT_STEP apart."""
+    return np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
+
+
+def limit_states(trajectory: Trajectory, robot) -> tuple:
+    """Return (t, q, q', q'', q''', wafer acceleration (K, 2)) at the ``limit_times``."""
+    t = limit_times(trajectory.duration)
+    q, qd, qdd, qddd = trajectory.evaluate_orders(t, range(4))
+    return t, q, qd, qdd, qddd, robot.arm.wafer_acceleration(q, qd, qdd)
+
+
+def state_ratios(robot, qd, qdd, qddd, wafer) -> dict:
+    """Return the largest |value| / limit of each of ``robot``'s limits over the states."""
+    limits = robot.limits
+    ratios = {
+        'velocity': _ratio(qd, limits.velocity),
+        'acceleration': _ratio(qdd, limits.acceleration),
+        'wafer_x': _ratio(wafer[:, 0], robot.wafer_acceleration_limit[0]),
+        'wafer_y': _ratio(wafer[:, 1], robot.wafer_acceleration_limit[1]),
+    }
+    if limits.jerk is not None:
+        ratios['jerk'] = _ratio(qddd, limits.jerk)
+    if robot.wafer_acceleration_norm_limit is not None:
+        ratios['wafer_norm'] = float(np.max(np.hypot(wafer[:, 0], wafer[:, 1]))
+                                     / robot.wafer_acceleration_norm_limit)
+    return ratios
+
+
+def limit_ratios(trajectory: Trajectory, robot) -> dict:
+    """
+    Return the largest |value| / limit of each limit, exactly as ``verify`` finds them.
+
+    The same check times, the same values: a curve whose ratios here are all <= 1 passes
+    the verification's limit check.
+    """
+    return state_ratios(robot, *limit_states(trajectory, robot)[2:])
