@@ -14,11 +14,12 @@ a stale, foreign or corrupt file is reported and rebuilt, never trusted. The dig
 against damage, not against a deliberate edit, so every curve is then verified in full as
 if just planned (``verify``: well formed and at rest exactly on its two stations on the
 branches it names, every limit, the proof and the dense collision check over all of
-[0, T]), MEASURED; what an answer reports is that verification, never a figure
-from the file. An entry that fails is left out and listed in ``rejected`` with the reason,
-never answered from; ``build_table`` given the loaded table plans those pairs again
-(``load_or_build_table`` does, and stores the table). Files are written to a temporary
-name and renamed, so a crash never leaves half a file.
+[0, T]): about 4 ms an entry, the default cell's 12 loaded in a median 43-53 ms (20 loads
+in process, on 2 cores shared with other work). What an answer reports is that
+verification, never a figure from the file. An entry that fails is left out and listed in
+``rejected`` with the reason, never answered from; ``build_table`` given the loaded table
+plans those pairs again (``load_or_build_table`` does, and stores the table). Files are
+written to a temporary name and renamed, so a crash never leaves half a file.
 """
 
 from dataclasses import asdict, dataclass, field, replace
