@@ -1,15 +1,20 @@
 """``wafer-plan``: one pair, all pairs, JSON schema, plots and exit codes."""
 
+from dataclasses import replace
 import json
+import shutil
 
+from independent import check
 import numpy as np
 import pytest
+from tampered import tamper
 
 from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.plan import main
-from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.plotting import plot_trajectory
+from wafer_planner_ros.service.table import build_table, save_table, table_key, table_path
 
 
 def _run(capsys, *argv):
@@ -165,3 +170,28 @@ def test_joint_angles_that_start_with_a_minus_are_ends_not_options(
     code, _, err = _run(capsys, '-1,x,2', 'loadlock1', '--cache-dir', str(roadmap_cache))
     assert code == 2 and '"-1,x,2" is neither a station name' in err
     assert 'unrecognized arguments' not in err
+
+
+def test_a_tampered_table_entry_is_planned_instead_with_a_warning(
+        roadmap_cache, tmp_path, capsys, default_cell, default_roadmap):
+    """A stored entry edited (every knot halved, the digest recomputed) is never printed."""
+    cache = tmp_path / 'cache'
+    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    # The table wafer-plan loads (whole-curve), its curves from the corridor method: any
+    # verified curve will do, and these take milliseconds.
+    whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    table = replace(build_table(Planner(default_cell, default_roadmap)), key=table_key(whole))
+    save_table(table, cache)
+    pair = ('loadport2', 'loadlock2')
+    edited = tamper(table_path(cache, table.key), {pair: 'halved'})[pair]
+    code, out, err = _run(capsys, *pair, '--cache-dir', str(cache), '--json', '-')
+    assert code == 0, err
+    plan = json.loads(out)
+    assert plan['status'] == 'ok' and plan['metrics'].get('source') != 'table'
+    assert plan['spline']['knots'] != edited['trajectory']['knots']
+    start, goal = (np.array(plan['spline']['control_points'][i]) for i in (0, -1))
+    stations = default_cell.stations
+    assert any(np.array_equal(c.q, start) for c in stations[pair[0]].configs)
+    assert any(np.array_equal(c.q, goal) for c in stations[pair[1]].configs)
+    check(default_cell, plan, start, goal)
+    assert 'loadport2 -> loadlock2' in err and 'rejected' in err and 'x its limit' in err, err

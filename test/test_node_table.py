@@ -1,16 +1,19 @@
 """The node's station table: planned in the worker at start-up, then answering station pairs."""
 
+from dataclasses import replace
 import shutil
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from node_harness import values, wait_for
 import numpy as np
 import pytest
+from tampered import tamper
 
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
-from wafer_planner_ros.service.table import load_table
+from wafer_planner_ros.service.table import build_table, load_table, save_table, table_key
+from wafer_planner_ros.service.table import table_path
 
 
 @pytest.mark.slow
@@ -48,5 +51,46 @@ def test_station_requests_are_answered_from_the_table_the_node_planned(
         assert got['code'] == 'OK', got
         assert got['source'] == 'planned' and got['method'] == 'whole-curve'
         assert float(got['budget']) == pytest.approx(0.2)
+    finally:
+        node.close()
+
+
+def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_path,
+                                                            default_cell, default_roadmap):
+    """Both directions of a pair edited in the cached table: planned, never sent as stored."""
+    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
+    isolate_dds(tmp_path)
+    cache = tmp_path / 'cache'
+    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    # The node's table (whole-curve), its curves from the corridor method: any verified
+    # curve will do, and these take milliseconds.
+    whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    table = replace(build_table(Planner(default_cell, default_roadmap)), key=table_key(whole))
+    save_table(table, cache)
+    there, back = ('loadport1', 'loadlock2'), ('loadlock2', 'loadport1')
+    edited = tamper(table_path(cache, table.key), {there: 'halved', back: 'shifted'})
+    node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.timeout': 30.0})
+    try:
+        # Loaded before the node took over: the two entries rejected at once, so that even
+        # the first requests are planned (or answered once planned again), never as stored.
+        for number, (start, goal) in enumerate((there, back, there)):
+            if number == 2:  # once planned again, from the table
+                wait_for(lambda: (lambda s: s['station_table'] == len(station_pairs(
+                    default_cell)) and s['busy_with'] != 'station_table')(node.status()), 120)
+            node.send_stations({'id': f't{number}', 'from': start, 'to': goal})
+            result = node.result(f't{number}')
+            assert result.level == DiagnosticStatus.OK, result.message
+            got = values(result)
+            assert got['certified'] == 'True'
+            assert all(float(v) <= 1.0 for k, v in got.items() if k.startswith('ratio_')), got
+            stored_duration = edited[(start, goal)]['trajectory']['knots'][-1]
+            assert float(got['cycle_time']) != pytest.approx(stored_duration, rel=1e-9)
+        assert got['source'] == 'table'
+        assert node.status()['station_table_rejected'] == 2
+        health = values(node.health(len(node.diagnostics)))
+        assert health['station_table_rejected'] == '2'
+        stored = load_table(whole, cache)  # planned again and stored: nothing to reject
+        assert not stored.rejected and len(stored) == len(station_pairs(default_cell))
     finally:
         node.close()

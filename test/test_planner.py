@@ -217,14 +217,53 @@ def test_a_clearance_margin_is_kept_by_roadmap_curve_and_verification(
 
 def test_verification_fails_a_curve_that_is_not_finite_inside(default_cell, default_roadmap):
     result = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
+    middle = len(result.trajectory.control_points) // 2
     points = result.trajectory.control_points.copy()
-    points[len(points) // 2, 1] = np.nan  # ends exact, a stretch in the middle undefined
+    points[middle, 1] = np.nan  # ends exact, a stretch in the middle undefined
     broken = CubicBSpline(result.trajectory.knots, points)
     checked = verify(broken, default_cell, result.start_q, result.goal_q)
+    assert checked.problems == (f'ill-formed curve: control point {middle} is '
+                                f'{points[middle].tolist()}, not finite',)
+    # Finite data, but beyond what a double holds once evaluated: the checks of the values.
+    points[middle, 1] = 1e308
+    with np.errstate(over='ignore', invalid='ignore'):
+        checked = verify(CubicBSpline(result.trajectory.knots, points), default_cell,
+                         result.start_q, result.goal_q)
     assert not checked.ok
     assert 'the position is not finite everywhere' in checked.problems
     assert any(p.startswith('collision') for p in checked.problems)
     assert verify(result.trajectory, default_cell, result.start_q, result.goal_q).ok
+
+
+def test_verification_names_what_makes_a_curve_ill_formed(default_cell, default_roadmap):
+    """Checked first, each named with its value; nothing is evaluated on such a curve."""
+    result = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
+    curve, start, goal = result.trajectory, result.start_q, result.goal_q
+    knots, points = curve.knots, curve.control_points
+    last = len(points) - 1
+
+    def edited(index, value, of=points):
+        copy = of.copy()
+        copy[index] = value
+        return copy
+
+    cases = [
+        (knots[:-1], points, f'{len(knots) - 1} knots for {len(points)} control points'),
+        (edited(5, np.inf, knots), points, 'knot 5 is inf, not finite'),
+        (edited(2, 0.01, knots), points, 'the first four knots are [0.0, 0.0, 0.01, 0.0]'),
+        (edited(-1, knots[-1] + 0.1, knots), points, 'the last four knots are'),
+        (edited(5, knots[4], knots), points, 'knot 5 is'),
+        (knots, edited(0, goal), 'control point 0 is'),
+        (knots, edited(last - 1, points[last - 1] + 1e-12),
+         f'control point {last - 1} is {(points[last - 1] + 1e-12).tolist()}, not the goal '
+         f'{goal.tolist()}: the motion does not end at rest'),
+    ]
+    for case_knots, case_points, words in cases:
+        checked = verify(CubicBSpline(case_knots, case_points), default_cell, start, goal)
+        assert len(checked.problems) == 1 and words in checked.problems[0], checked.problems
+        assert checked.problems[0].startswith('ill-formed curve: ')
+        assert checked.proof is None and checked.limit_samples == 0
+    assert curve.ill_formed(start, goal) is None
 
 
 def test_one_branch_combination_can_be_asked_for(default_cell, default_roadmap):

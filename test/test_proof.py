@@ -1,11 +1,13 @@
 """The proof that a curve is collision-free: sound against dense sampling, and it refutes."""
 
 import numpy as np
+import pytest
 
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
+from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times, verify
 
 DENSE = 200001
 """Samples of the dense clearance check the proof is compared with."""
@@ -122,3 +124,33 @@ def test_curves_grazing_a_wall_are_told_apart_at_a_fifth_of_a_millimetre(default
         if tried == 8:
             break
     assert tried == 8
+
+
+def test_a_curve_not_clamped_at_zero_is_proven_and_checked_over_all_its_time(
+        default_cell, default_roadmap):
+    """
+    Knots shifted by 0.3 s: evaluated from t = 0, each curve first runs backwards.
+
+    Its polynomial pieces begin at 0.3 s; the proof and the dense check cover [0, T] all the
+    same, so a curve through the wall before its first piece is refuted and caught.
+    """
+    planner = Planner(default_cell, default_roadmap)
+    model, lipschitz = default_cell.clearance_model, default_cell.robot.lipschitz
+    curves = [planner.plan(start, goal).trajectory for start, goal in station_pairs(default_cell)]
+    refuted = 0
+    for curve in curves:
+        shifted = CubicBSpline(curve.knots + 0.3, curve.control_points)
+        assert shifted.breaks()[0] == pytest.approx(0.3)
+        proof = prove(shifted, model, lipschitz)
+        if _dense_clearance(default_cell, shifted).min() <= 0.0:
+            refuted += 1
+            assert not proof.certified
+    assert refuted >= 1
+    for curve in curves:
+        shifted = CubicBSpline(curve.knots + 0.3, curve.control_points)
+        times = collision_times(shifted)
+        assert times[0] == 0.0 and times[-1] == shifted.duration
+        assert np.abs(np.diff(shifted.evaluate(times), axis=0)).max() <= COLLISION_STEP * (
+            1.0 + 1e-9)
+        assert not verify(shifted, default_cell, curve.control_points[0],
+                          curve.control_points[-1]).ok

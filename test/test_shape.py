@@ -42,6 +42,20 @@ def test_refinement_keeps_the_curve_exactly(corridor):
                            atol=1e-9 * 10 ** order)
 
 
+def test_refinement_keeps_the_stops_exactly():
+    """Equal control points at the ends stay equal: rounding would set the curve moving."""
+    rng = np.random.default_rng(2)
+    for _ in range(100):
+        points = rng.uniform(-2.0, 2.0, (4, 3))
+        points = np.vstack([points[:1], points[:1], points, points[-1:], points[-1:]])
+        intervals = rng.uniform(0.05, 0.5, len(points) - 3)
+        intervals[[0, -1]] = rng.uniform(1.0, 2.0, 2)  # the longest: halved first
+        refined = refine(CubicBSpline.from_intervals(points, intervals), len(intervals) + 4)
+        assert np.all(refined.control_points[:3] == points[0])
+        assert np.all(refined.control_points[-3:] == points[-1])
+        assert refined.ill_formed(points[0], points[-1]) is None
+
+
 def _perturbed(cell, corridor) -> tuple:
     """Return (problem, wafer samples, clearance samples, points, durations) off the start."""
     problem = ShapeProblem(corridor.trajectory, cell, ShapeSettings(), TimingSettings())

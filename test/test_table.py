@@ -3,11 +3,13 @@
 from collections import namedtuple
 from dataclasses import replace
 import json
+import re
 import time
 
 from independent import check
 import numpy as np
 import pytest
+from tampered import digest, tamper
 
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
@@ -16,6 +18,7 @@ from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
 from wafer_planner_ros.service.table import save_table, table_key, table_path, TableError
+from wafer_planner_ros.trajectory.verify import verify
 
 _Request = namedtuple('_Request', 'start goal')
 
@@ -95,16 +98,19 @@ def test_a_damaged_or_foreign_file_is_refused(planner, built, tmp_path, damage, 
         load_table(planner, tmp_path)
 
 
-def test_an_entry_that_does_not_join_its_stations_is_refused(planner, built, tmp_path):
+def test_an_entry_that_does_not_join_its_stations_is_rejected(planner, built, tmp_path):
     swapped = replace(built, entries=dict(built.entries))
     pairs = sorted(built.entries)
     swapped.entries[pairs[0]] = built.entries[pairs[1]]  # digest consistent, curve wrong
     save_table(swapped, tmp_path)
-    with pytest.raises(TableError, match='does not join the two stations'):
-        load_table(planner, tmp_path)
-    # load_or_build_table then rebuilds and stores a good one.
+    loaded = load_table(planner, tmp_path)
+    assert set(loaded.rejected) == {pairs[0]} and set(loaded.entries) == set(pairs[1:])
+    assert 'not the goal' in loaded.rejected[pairs[0]]
+    # load_or_build_table then plans it again and stores a good table.
     rebuilt = load_or_build_table(planner, tmp_path)
-    assert not rebuilt.loaded and load_table(planner, tmp_path).loaded
+    assert not rebuilt.loaded and set(rebuilt.entries) == set(pairs)
+    again = load_table(planner, tmp_path)
+    assert again.loaded and not again.rejected and set(again.entries) == set(pairs)
 
 
 def test_a_request_is_answered_from_the_table_the_corridor_or_the_budget(planner, built):
@@ -129,7 +135,7 @@ def test_a_request_is_answered_from_the_table_the_corridor_or_the_budget(planner
     assert budgeted.cycle_time <= corridor.cycle_time
 
 
-def test_a_table_missing_pairs_or_with_a_colliding_curve_is_refused(planner, built, tmp_path):
+def test_a_table_missing_pairs_is_refused_a_colliding_curve_rejected(planner, built, tmp_path):
     pairs = sorted(built.entries)
     short = replace(built, entries={pair: built.entries[pair] for pair in pairs[1:]})
     save_table(short, tmp_path)
@@ -140,8 +146,9 @@ def test_a_table_missing_pairs_or_with_a_colliding_curve_is_refused(planner, bui
     points = entry['trajectory']['control_points']
     points[len(points) // 2] = [-np.pi / 2, 0.0, 0.0]
     save_table(replace(built, entries=dict(built.entries) | {pairs[0]: entry}), tmp_path)
-    with pytest.raises(TableError, match='not proven collision-free'):
-        load_table(planner, tmp_path)
+    loaded = load_table(planner, tmp_path)
+    assert pairs[0] not in loaded.entries
+    assert 'not proven collision-free' in loaded.rejected[pairs[0]]
 
 
 def test_a_reversed_entry_names_its_own_branches(roadmap_cache):
@@ -154,3 +161,70 @@ def test_a_reversed_entry_names_its_own_branches(roadmap_cache):
     assert any(e['branches'] != e['branches'][::-1] for e in reversed_entries)
     for entry in table.entries.values():
         assert entry['metrics']['branches'] == entry['branches']
+
+
+TAMPERED = ('loadport1', 'loadlock2')
+"""The pair whose entry the tests edit."""
+
+
+@pytest.mark.parametrize('kind, words', [
+    ('halved', 'reaches [0-9.]+ x its limit'),
+    ('shifted', r'the first four knots are \[0.3, 0.3, 0.3, 0.3\], not 0'),
+    ('nudged', 'control point 1 is .*, not the start .*: the motion does not start at rest'),
+    ('nan', 'control point [0-9]+ is .*nan.*, not finite'),
+])
+def test_a_tampered_entry_is_rejected_never_published(planner, built, default_cell,
+                                                      roadmap_cache, tmp_path, kind, words):
+    """An entry edited, its digest recomputed: verified in full, rejected, planned again."""
+    save_table(built, tmp_path)
+    tamper(table_path(tmp_path, built.key), {TAMPERED: kind})
+    loaded = load_table(planner, tmp_path)
+    answer = loaded.answer(planner, *TAMPERED)
+    if answer is not None:  # what the table gives must hold, checked independently
+        info = roadmap_json(load_or_build(default_cell, cache_dir=roadmap_cache))
+        check(default_cell, plan_json(answer, info, default_cell.robot.joint_names),
+              answer.start_q, answer.goal_q)
+    assert answer is None and TAMPERED not in loaded.entries
+    assert set(loaded.rejected) == {TAMPERED}
+    assert re.search(words, loaded.rejected[TAMPERED]), loaded.rejected[TAMPERED]
+    assert set(loaded.entries) == set(built.entries) - {TAMPERED}
+    # load_or_build_table plans it again (no rejected pair is ever answered from the file)
+    # and stores the table whole.
+    completed = load_or_build_table(planner, tmp_path)
+    assert set(completed.rejected) == {TAMPERED} and not completed.loaded
+    assert set(completed.entries) == set(built.entries)
+    again = completed.answer(planner, *TAMPERED)  # here the way back, backwards
+    assert again.verification.ok and again.cycle_time == pytest.approx(
+        built.answer(planner, *TAMPERED).cycle_time, rel=1e-12)
+    stored = load_table(planner, tmp_path)
+    assert stored.loaded and not stored.rejected and set(stored.entries) == set(built.entries)
+
+
+def test_the_figures_published_are_the_curves_own(planner, built, default_cell, tmp_path):
+    """The file stores no figure: the load verifies every curve and answers with that."""
+    path = save_table(built, tmp_path)
+    document = json.loads(path.read_text())
+    assert document['format'] == 2
+    assert not any('verification' in entry for entry in document['entries'])
+    loaded = load_table(planner, tmp_path)
+    for pair in built.entries:
+        answer = loaded.answer(planner, *pair)
+        fresh = verify(answer.trajectory, default_cell, answer.start_q, answer.goal_q)
+        assert fresh.ok and answer.verification.ratios == fresh.ratios
+        assert answer.verification.min_clearance == fresh.min_clearance
+        assert answer.verification.proof.certified
+
+
+def test_a_file_of_the_first_format_is_planned_again(planner, built, tmp_path):
+    """Format 1 kept its figures, a NaN among them here: the whole file is refused."""
+    path = save_table(built, tmp_path)
+    document = json.loads(path.read_text())
+    document.pop('format', None)
+    for entry in document['entries']:
+        entry['verification'] = {'ratios': {'velocity': float('nan')}}
+    document['digest'] = digest(document['entries'], document['failures'])
+    path.write_text(json.dumps(document))
+    with pytest.raises(TableError, match='format 1'):
+        load_table(planner, tmp_path)
+    assert not load_or_build_table(planner, tmp_path).loaded
+    assert load_table(planner, tmp_path).loaded

@@ -27,10 +27,19 @@ def parse_end(text: str):
 
 
 def plan_one(planner, start, goal, info, joint_names, stations=None) -> tuple:
-    """Return (result or None, JSON object) for one request; from ``stations`` if it has it."""
+    """
+    Return (result or None, JSON object) for one request; from ``stations`` if it has it.
+
+    A pair whose stored entry the table rejected on load is never answered from the file:
+    it is planned, with a warning on stderr naming it and why.
+    """
     try:
         result = None
         if stations is not None and isinstance(start, str) and isinstance(goal, str):
+            rejected = stations.rejected.get((start, goal))
+            if rejected is not None:
+                print(f'warning: station table: {start} -> {goal} rejected ({rejected}); '
+                      'planned again', file=sys.stderr)
             result = stations.answer(planner, start, goal)
         if result is None:
             result = planner.plan(start, goal)
@@ -45,6 +54,8 @@ def station_table(args, planner, quiet: bool):
 
     A single pair is answered from a cached table when there is one and planned on its own
     otherwise (building the whole table for one pair would take the time of all of them).
+    Every cached entry is verified in full on load; one that fails is rejected and planned
+    (for --all-pairs into the table, which is stored again).
     """
     if planner.settings.method != 'whole-curve':
         return None

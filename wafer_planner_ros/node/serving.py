@@ -3,9 +3,10 @@ A roadmap ready to serve: its planner, when it took over, and how it got there.
 
 The worker's loading thread builds or loads a roadmap (``progress_reporter`` logs the
 build), waits for the compiled kernels (``node.startup``), loads the cached station table
-(``load_station_table``), which also verifies its entries, and hands it all over as a
-``Serving``: from then on the node is ready. When the table was not cached, it is planned
-then (``build_station_table``).
+(``load_station_table``), which verifies every entry in full and leaves out those that
+fail, and hands it all over as a ``Serving``: from then on the node is ready. When the
+table was not cached, it is planned then, and when entries were rejected, those pairs
+(``build_station_table``; ``table_to_plan`` says whether).
 ``plan_request`` chooses how a request is answered: a station pair from the table when it
 holds it; a station pair it does not hold (yet) by the corridor curve, which takes
 milliseconds; anything else by the whole-curve optimisation within
@@ -55,12 +56,21 @@ def load_station_table(planner: Planner, settings, logger) -> Optional[StationTa
     except TableError as exc:
         logger.info(f'station table: {exc}; planning it')
         return None
+    for (start, goal), reason in sorted(table.rejected.items()):
+        logger.warning(f'station table: {start} -> {goal} rejected, never answered from the '
+                       f'file, planned again: {reason}')
     _report(table, logger)
     return table
 
 
-def build_station_table(planner: Planner, settings, logger) -> StationTable:
-    """Plan the station table of a serving planner (and store it in the cache)."""
+def table_to_plan(table: Optional[StationTable], settings) -> bool:
+    """Return whether a loaded station table (None: none) is to be planned, whole or in part."""
+    return settings.station_table and (table is None or bool(table.rejected))
+
+
+def build_station_table(planner: Planner, settings, logger,
+                        loaded: Optional[StationTable] = None) -> StationTable:
+    """Plan the station table of a serving planner (or the pairs ``loaded`` rejected); store it."""
     begun = time.monotonic()
 
     def progress(done: int, total: int, pair: str) -> None:
@@ -68,7 +78,7 @@ def build_station_table(planner: Planner, settings, logger) -> StationTable:
                     f'{time.monotonic() - begun:.1f} s)')
 
     table = build_and_store_table(_whole_curve(planner), settings.cache_dir, progress,
-                                  logger.warning)
+                                  logger.warning, loaded)
     _report(table, logger)
     return table
 
@@ -85,11 +95,17 @@ def _report(table: StationTable, logger) -> None:
                 f'{"loaded" if table.loaded else "planned"} in {table.seconds:.2f} s')
 
 
-def held_pairs(table: tuple, serving: Optional[Serving]) -> int:
-    """Return how many pairs a (loaded_ns, station table) holds for ``serving`` (0: none)."""
+def table_counts(table: tuple, serving: Optional[Serving]) -> dict:
+    """
+    Return the status counts of a (loaded_ns, station table) for ``serving``.
+
+    ``station_table``: the pairs it holds; ``station_table_rejected``: the entries of the
+    cached file it rejected on load. Both 0 without a table of the serving roadmap.
+    """
     loaded_ns, stations = table
-    return len(stations) if stations is not None and serving is not None \
-        and loaded_ns == serving.loaded_ns else 0
+    current = stations is not None and serving is not None and loaded_ns == serving.loaded_ns
+    return {'station_table': len(stations) if current else 0,
+            'station_table_rejected': len(stations.rejected) if current else 0}
 
 
 def plan_request(planner: Planner, table: Optional[StationTable], request, settings,

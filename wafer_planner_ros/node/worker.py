@@ -12,7 +12,8 @@ roadmap, waits for the compiled kernels (``startup.kernels_ready``: loaded from 
 cache since the process started, or compiled when missing) and loads the cached station
 table, and only then does the roadmap serve: the node is ready when it can answer, and
 until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. When no
-table was cached it is planned next (``busy_with: station_table``), station pairs getting
+table was cached it is planned next, and so are the pairs whose cached entries failed
+verification (``busy_with: station_table``), station pairs the table does not hold getting
 the corridor curve meanwhile. A rebuild does the same while the previous roadmap serves,
 and keeps it serving when it fails (``rebuild_failed`` in the status says why). Each
 request is planned on the roadmap in force when it was received, the one a recording pairs
@@ -38,8 +39,9 @@ from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import build_station_table, held_pairs, load_station_table
+from wafer_planner_ros.node.serving import build_station_table, load_station_table
 from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving
+from wafer_planner_ros.node.serving import table_counts, table_to_plan
 from wafer_planner_ros.node.startup import kernels_ready, since_process_start
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
@@ -90,7 +92,7 @@ class PlanningWorker:
         self._table = (None, None)
         """(loaded_ns of the roadmap it belongs to, the station table)."""
         self._planning_table = False
-        """No station table was cached: it is being planned."""
+        """No station table was cached, or entries were rejected: it is being planned."""
         self._compiling = False
         """The compiled kernels are missing from numba's cache: they are being compiled."""
         self._pending_ns: Optional[int] = None
@@ -228,7 +230,7 @@ class PlanningWorker:
                 'last_error': self.last_error,
                 'rebuild_failed': self.load_failed,
                 'last_rebuild_error': self.last_load_error,
-                'station_table': held_pairs(self._table, serving),
+                **table_counts(self._table, serving),
                 'kernels_compiled': kernels.compiled_count(),
             }
 
@@ -464,7 +466,7 @@ class PlanningWorker:
                 self._previous = self._serving
                 self._serving = Serving(planner, cached, loaded_ns)
                 self._table = (loaded_ns, table)
-                self._planning_table = table is None and settings.station_table
+                self._planning_table = table_to_plan(table, settings)
                 self._loading_cell = None
                 self.load_failed, self.last_load_error = False, ''
                 self.lock.notify_all()
@@ -481,10 +483,10 @@ class PlanningWorker:
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
-        if table is not None or not settings.station_table:
+        if not table_to_plan(table, settings):
             return
         try:
-            table = build_station_table(planner, settings, self._logger)
+            table = build_station_table(planner, settings, self._logger, table)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         with self.lock:

@@ -17,6 +17,7 @@ that is how the time optimisation differentiates it (complex step).
 from dataclasses import dataclass
 from functools import cached_property
 from math import factorial
+from typing import Optional
 
 import numpy as np
 
@@ -197,11 +198,58 @@ class CubicBSpline(Trajectory):
         for order in orders:
             values = _horner(coefficients, starts, span, t, order)
             if order == 0:
-                # A clamped curve passes through its end points; make that exact.
-                values[t <= 0.0] = self.control_points[0]
-                values[t >= self.duration] = self.control_points[-1]
+                # A clamped curve passes through its end points; make that exact (only where
+                # its spans begin at 0 and end at T: otherwise it runs on, continuous).
+                if starts[0] == 0.0:
+                    values[t <= 0.0] = self.control_points[0]
+                if self.knots[-DEGREE - 1] == self.duration:
+                    values[t >= self.duration] = self.control_points[-1]
             out.append(values)
         return tuple(out)
+
+    def ill_formed(self, start: np.ndarray, goal: np.ndarray) -> Optional[str]:
+        """
+        Return what makes the curve no clamped cubic at rest from start to goal, or None.
+
+        Its knots must be finite, four more than the control points, the first four 0, the
+        last four one time T and those between increasing (every span lasts); the control
+        points must be finite, the first two exactly ``start`` and the last two exactly
+        ``goal`` (equal neighbours: zero velocity at the ends).
+        """
+        knots, points = np.asarray(self.knots), np.asarray(self.control_points)
+        start, goal = np.asarray(start, float), np.asarray(goal, float)
+        if points.ndim != 2 or len(points) < DEGREE + 1 or points.shape[1] != len(start):
+            return (f'the control points have the shape {points.shape}, not (n >= '
+                    f'{DEGREE + 1}, {len(start)})')
+        if knots.shape != (len(points) + DEGREE + 1,):
+            return (f'the curve has {knots.size} knots for {len(points)} control points, not '
+                    f'{len(points) + DEGREE + 1}')
+        bad = np.flatnonzero(~np.isfinite(knots))
+        if len(bad):
+            return f'knot {bad[0]} is {float(knots[bad[0]])}, not finite'
+        if np.any(knots[:DEGREE + 1] != 0.0):
+            return (f'the first four knots are {knots[:DEGREE + 1].tolist()}, not 0: the curve '
+                    'does not start at t = 0 as a clamped cubic')
+        if np.any(knots[-DEGREE - 1:] != knots[-1]):
+            return (f'the last four knots are {knots[-DEGREE - 1:].tolist()}, not one time T: '
+                    'the curve does not end as a clamped cubic')
+        bad = np.flatnonzero(np.diff(knots[DEGREE:-DEGREE]) <= 0.0)
+        if len(bad):
+            i = DEGREE + bad[0] + 1
+            return (f'knot {i} is {float(knots[i])}, not after knot {i - 1} '
+                    f'({float(knots[i - 1])}): span {bad[0]} does not last')
+        bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+        if len(bad):
+            return f'control point {bad[0]} is {points[bad[0]].tolist()}, not finite'
+        last = len(points) - 1
+        at_rest = ': the motion does not {} at rest'
+        for i, end, name, why in ((0, start, 'start', ''), (last, goal, 'goal', ''),
+                                  (1, start, 'start', at_rest.format('start')),
+                                  (last - 1, goal, 'goal', at_rest.format('end'))):
+            if not np.array_equal(points[i], end):
+                return f'control point {i} is {points[i].tolist()}, not the {name} ' \
+                    f'{end.tolist()}{why}'
+        return None
 
     def breaks(self) -> np.ndarray:
         """Return the knot times 0 = t_3 < ... < t_{n+1} = T between the spans."""

@@ -7,7 +7,7 @@ of curve, so that a new way of shaping or timing one plugs in without touching t
 """
 
 from abc import ABC, abstractmethod
-from typing import Mapping, Sequence, Tuple
+from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -29,8 +29,31 @@ class Trajectory(ABC):
         return self.evaluate_orders(t, (order,))[0]
 
     @abstractmethod
+    def ill_formed(self, start: np.ndarray, goal: np.ndarray) -> Optional[str]:
+        """
+        Return what makes the curve no motion at rest from ``start`` to ``goal``, or None.
+
+        Checked before anything is evaluated on it: the data defining the curve (finite,
+        consistent, spanning [0, T]) and its ends, exactly at ``start`` and ``goal`` with
+        zero velocity there.
+        """
+
+    @abstractmethod
     def breaks(self) -> np.ndarray:
         """Return the times (S + 1,) between the curve's polynomial pieces, 0 to T."""
+
+    def covering_breaks(self) -> np.ndarray:
+        """
+        Return ``breaks`` cut to [0, T] with 0 and T added: pieces covering all of [0, T].
+
+        Evaluated before its first break or after its last, a curve continues its first or
+        last polynomial piece, so each added piece lies within one polynomial too. For a
+        well-formed curve (``ill_formed``) these are the breaks themselves; for another they
+        make whatever is evaluated at [0, T] checked all the same.
+        """
+        breaks, duration = self.breaks(), self.duration
+        inside = breaks[(breaks > 0.0) & (breaks < duration)]
+        return np.concatenate([[0.0], inside, [duration]])
 
     @abstractmethod
     def peak_speed(self, a, b) -> np.ndarray:
@@ -44,10 +67,11 @@ class Trajectory(ABC):
         """
         Return (boundaries (S + 1,), peaks (S, J)): the curve in pieces and each one's peaks.
 
-        Every polynomial piece is cut into ``subdivisions`` equal pieces; ``peaks`` are the
-        exact largest |q'_j| of every joint on each.
+        Every polynomial piece (``covering_breaks``: all of [0, T]) is cut into
+        ``subdivisions`` equal pieces; ``peaks`` are the exact largest |q'_j| of every joint
+        on each.
         """
-        breaks = self.breaks()
+        breaks = self.covering_breaks()
         steps = np.arange(subdivisions) / subdivisions
         boundaries = (breaks[:-1, None] + np.diff(breaks)[:, None] * steps).ravel()
         boundaries = np.append(boundaries, breaks[-1])

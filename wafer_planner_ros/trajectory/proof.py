@@ -11,7 +11,9 @@ some body is split at its middle time and both halves are tested; a middle in co
 refutes the curve. A piece still open after ``max_depth`` splits (the curve grazes an
 obstacle within nanometres) is left unproven: the answer errs only towards "not proven".
 The model's bodies are grown by the cell's clearance margin, so a proof keeps the margin.
-All pieces are tested together: one vectorised clearance call per bisection level.
+The pieces cover all of [0, T] (``Trajectory.covering_breaks``), whatever the curve's own
+breaks: whatever is evaluated there is proven. All pieces are tested together: one
+vectorised clearance call per bisection level.
 """
 
 from dataclasses import dataclass, field
@@ -45,7 +47,7 @@ class CurveProof:
 def prove(trajectory: Trajectory, model, lipschitz: np.ndarray,
           max_depth: int = DEFAULT_MAX_DEPTH) -> CurveProof:
     """Prove ``trajectory`` free in ``model`` piece by piece (see the module's description)."""
-    breaks = trajectory.breaks()
+    breaks = trajectory.covering_breaks()
     clearance = model.body_clearance(trajectory.evaluate(breaks))
     evaluations = len(breaks)
     a, b, da, db = breaks[:-1], breaks[1:], clearance[:-1], clearance[1:]

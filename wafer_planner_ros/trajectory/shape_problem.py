@@ -32,7 +32,10 @@ def refine(curve: CubicBSpline, spans: int) -> CubicBSpline:
         new[k + 1:] = points[k:]
         for i in range(k - DEGREE + 1, k + 1):
             alpha = (at - knots[i]) / (knots[i + DEGREE] - knots[i])
-            new[i] = alpha * points[i] + (1.0 - alpha) * points[i - 1]
+            # Between equal points (a stop) the point itself, exactly: rounding would set
+            # the curve moving at its end.
+            new[i] = np.where(points[i] == points[i - 1], points[i],
+                              alpha * points[i] + (1.0 - alpha) * points[i - 1])
         points, knots = new, np.insert(knots, k + 1, at)
     return CubicBSpline(knots, points)
 

@@ -1,12 +1,16 @@
 """
-Verification of a trajectory before it leaves the planner (SPEC section 3.9).
+Verification of a trajectory before it leaves the planner, whatever made it.
 
-The curve must be proven collision-free (``proof.prove``: no sampling step). As a second,
-independent line, limits are checked every ``LIMIT_STEP`` seconds and collisions at
-configurations no more than ``COLLISION_STEP`` rad apart in any joint: on each eighth of a
-span the time step between collision checks is ``COLLISION_STEP`` over the exact peak
-joint speed there. Also checked: the start and goal are hit exactly, and velocity and
-acceleration are zero at both ends.
+First the curve must be well formed (``Trajectory.ill_formed``: finite, consistent data,
+exactly at the start and goal and at rest there); an ill-formed one fails at once and is
+evaluated no further. Then it must be proven collision-free (``proof.prove``: no sampling
+step) over all of [0, T]. As a second, independent line, limits are checked every
+``LIMIT_STEP`` seconds from 0 to T and collisions at configurations no more than
+``COLLISION_STEP`` rad apart in any joint, from 0 to T: on each eighth of a piece
+(``Trajectory.pieces``) the time step between collision checks is ``COLLISION_STEP`` over
+the exact peak joint speed there. Also checked: the start and goal are hit exactly, and
+velocity and acceleration are zero at both ends. Every figure that is NaN is a problem:
+a comparison with NaN never passes.
 """
 
 from dataclasses import dataclass, field
@@ -49,6 +53,9 @@ class Verification:
 
 def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
     """Check a trajectory of ``cell``'s robot from start to goal."""
+    problem = trajectory.ill_formed(start, goal)
+    if problem is not None:
+        return Verification(problems=(f'ill-formed curve: {problem}',))
     robot = cell.robot
     limits = robot.limits
     t, q, qd, qdd, qddd, wafer = limit_states(trajectory, robot)
