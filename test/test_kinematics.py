@@ -45,6 +45,26 @@ def test_wafer_acceleration_matches_second_differences_of_positions(cell):
                        atol=1e-6)
 
 
+def test_wafer_jerk_matches_differences_of_the_acceleration(cell):
+    arm = cell.robot.arm
+    rng = np.random.default_rng(5)
+    a, b, w = rng.uniform(-2, 2, (3, 3))
+    t = rng.uniform(0, 3, 40)[:, None]
+
+    def state(t):
+        return (a + b * np.sin(w * t), b * w * np.cos(w * t), -b * w ** 2 * np.sin(w * t),
+                -b * w ** 3 * np.cos(w * t))
+
+    h = 1e-5
+    numeric = (arm.wafer_acceleration(*state(t + h)[:3])
+               - arm.wafer_acceleration(*state(t - h)[:3])) / (2 * h)
+    jerk = arm.wafer_jerk(*state(t))
+    assert jerk.shape == (40, 2)
+    assert np.allclose(jerk, numeric, atol=1e-5)
+    # One state alone, as (3,) arrays.
+    assert np.allclose(arm.wafer_jerk(*(x[7] for x in state(t))), jerk[7])
+
+
 def test_inverse_kinematics_returns_both_branches_that_reproduce_the_pose(cell):
     arm, limits = cell.robot.arm, cell.robot.limits.position
     rng = np.random.default_rng(5)

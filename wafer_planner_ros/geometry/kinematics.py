@@ -100,13 +100,12 @@ class PlanarArm:
         jerks: p''' = sum_j l_j ((z_j - w_j^3) (-sin th_j, cos th_j)
         - 3 w_j a_j (cos th_j, sin th_j)).
         """
-        theta, omega, alpha, zeta = (np.cumsum(np.asarray(x, float), axis=-1)
-                                     for x in (q, qd, qdd, qddd))
-        c, s = np.cos(theta), np.sin(theta)
-        turn = self.link_lengths * (zeta - omega ** 3)
-        pull = 3.0 * self.link_lengths * omega * alpha
-        return np.stack([np.sum(-turn * s - pull * c, axis=-1),
-                         np.sum(turn * c - pull * s, axis=-1)], axis=-1)
+        states = [np.asarray(x, dtype=float) for x in (q, qd, qdd, qddd)]
+        shape = np.broadcast_shapes(*(x.shape for x in states))
+        states = [np.ascontiguousarray(np.broadcast_to(x, shape).reshape(-1, 3))
+                  for x in states]
+        jerk = _wafer_jerk_many(np.asarray(self.link_lengths, float), *states)
+        return jerk.reshape(shape[:-1] + (2,))
 
     def inverse(self, wafer_center, heading: float, position_limits: np.ndarray) -> list:
         """
@@ -168,3 +167,19 @@ def _wafer_acceleration_many(link_lengths, q, qd, qdd):
     for k in range(len(q)):
         ax[k], ay[k] = wafer_acceleration_point(link_lengths, q[k], qd[k], qdd[k])
     return ax, ay
+
+
+@kernel(nogil=True)
+def _wafer_jerk_many(link_lengths, q, qd, qdd, qddd):
+    jerk = np.zeros((len(q), 2))
+    for k in range(len(q)):
+        theta, omega, alpha, zeta = 0.0, 0.0, 0.0, 0.0
+        for j in range(3):
+            theta, omega = theta + q[k, j], omega + qd[k, j]
+            alpha, zeta = alpha + qdd[k, j], zeta + qddd[k, j]
+            c, s = np.cos(theta), np.sin(theta)
+            turn = link_lengths[j] * (zeta - omega ** 3)
+            pull = 3.0 * link_lengths[j] * omega * alpha
+            jerk[k, 0] += -turn * s - pull * c
+            jerk[k, 1] += turn * c - pull * s
+    return jerk
