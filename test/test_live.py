@@ -251,5 +251,6 @@ def test_without_the_sdk_the_live_view_says_so_and_stays_off(monkeypatch):
                       'foxglove-sdk is not installed (pip install foxglove-sdk==0.30.3)'
                       '; the node serves on without it']
     view.publish(publisher, b'markers')  # nothing to serve them to: no error
-    assert view.status() == {'live': '', 'live_error': errors[0].split(';')[0]}
+    assert view.status() == {'live': '', 'live_error': errors[0].split(';')[0],
+                             'live_clients': 0}
     assert not view.start('0.0.0.0', 0) and len(errors) == 1  # off: the SDK is not needed
