@@ -3,7 +3,8 @@ Benchmark: the live view (``live.port``) under clients that subscribe and never 
 
 The node is started as a process (``python -m wafer_planner_ros.node.main``, this checkout's
 code) with the live view on loopback, recording and the station table off. Then, for 1 and
-for 20 clients (``--clients``): each connects (a raw WebSocket, so that nothing reads its
+for 20 clients with the default ``live.max_clients`` (4), and for 20 with ``live.max_clients``
+20 (``--runs CLIENTS:MAX_CLIENTS ...``): each connects (a raw WebSocket, so that nothing reads its
 socket after the channels are advertised: no client library buffering for it), then
 subscribes to the roadmap markers (2 MB, latched) and unsubscribes again, as fast as it can,
 for ``--seconds`` (3); the node's resident memory is sampled every 50 ms (the attack stops
@@ -12,7 +13,7 @@ with every client still connected, and how long until the process has ended (kil
 60 s). Clients the node refuses (``live.max_clients``) are counted.
 
 Prints a table; writes ``bench/results/live.json``. Usage:
-``python bench/bench_live.py [--clients 1 20] [--seconds S] [--limit-mb MB]``.
+``python bench/bench_live.py [--runs 1:4 20:4 20:20] [--seconds S] [--limit-mb MB]``.
 """
 
 import argparse
@@ -48,7 +49,7 @@ def free_port() -> int:
 class Node:
     """The node as a process with the live view on ``port``, its log read line by line."""
 
-    def __init__(self, port: int, cache: str, extra=()):
+    def __init__(self, port: int, cache: str, max_clients: int):
         env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                    ROS_DOMAIN_ID=str(30 + os.getpid() % 50), ROS_LOG_DIR=tempfile.mkdtemp(),
                    PYTHONUNBUFFERED='1',
@@ -58,7 +59,7 @@ class Node:
             [sys.executable, '-m', 'wafer_planner_ros.node.main', '--ros-args',
              '-p', 'planning.station_table:=false', '-p', 'recording.enabled:=false',
              '-p', f'roadmap.cache_dir:={cache}', '-p', 'live.host:=127.0.0.1',
-             '-p', f'live.port:={port}', *extra],
+             '-p', f'live.port:={port}', '-p', f'live.max_clients:={max_clients}'],
             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines = queue.Queue()
         self.log = []
@@ -193,10 +194,11 @@ class Stalled:
         self.sock.close()
 
 
-def attack(clients: int, seconds: float, limit_mb: float, cache: str) -> dict:
+def attack(clients: int, max_clients: int, seconds: float, limit_mb: float,
+           cache: str) -> dict:
     """Run one attack on a fresh node; return its figures."""
     port = free_port()
-    node = Node(port, cache)
+    node = Node(port, cache, max_clients)
     try:
         node.wait_for('live view: ', 60.0)
         node.wait_for('ready: ', 300.0)
@@ -229,7 +231,8 @@ def attack(clients: int, seconds: float, limit_mb: float, cache: str) -> dict:
             node.process.wait()
     for s in stalled:
         s.close()
-    return {'clients': clients, 'admitted': len(admitted), 'refused': clients - len(admitted),
+    return {'clients': clients, 'max_clients': max_clients, 'admitted': len(admitted),
+            'refused': clients - len(admitted),
             'messages_sent': sum(s.sent for s in admitted), 'rss_before_mb': round(before, 1),
             'rss_peak_mb': round(peak, 1), 'growth_mb': round(peak - before, 1),
             'attack_s': round(limited if limited is not None else seconds, 2),
@@ -240,18 +243,21 @@ def attack(clients: int, seconds: float, limit_mb: float, cache: str) -> dict:
 def main() -> int:
     """Run the benchmark; print and store the figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--clients', type=int, nargs='+', default=[1, 20])
+    parser.add_argument('--runs', nargs='+', default=['1:4', '20:4', '20:20'],
+                        help='CLIENTS:MAX_CLIENTS (live.max_clients) of each run')
     parser.add_argument('--seconds', type=float, default=3.0)
     parser.add_argument('--limit-mb', type=float, default=4000.0)
     parser.add_argument('--cache-dir', default=str(Path('~/.cache/wafer_planner_ros')
                                                    .expanduser()))
     args = parser.parse_args()
     runs = []
-    for clients in args.clients:
-        run = attack(clients, args.seconds, args.limit_mb, args.cache_dir)
+    for spec in args.runs:
+        clients, max_clients = (int(v) for v in spec.split(':'))
+        run = attack(clients, max_clients, args.seconds, args.limit_mb, args.cache_dir)
         runs.append(run)
         limit = ' (stopped at the limit)' if run['stopped_at_limit'] else ''
-        print(f"{clients:3d} clients ({run['admitted']} admitted, {run['refused']} refused), "
+        print(f"{clients:3d} clients, live.max_clients {max_clients} ({run['admitted']} "
+              f"admitted, {run['refused']} refused), "
               f"{run['messages_sent']} (un)subscribes in {run['attack_s']:.1f} s: RSS "
               f"{run['rss_before_mb']:.0f} -> {run['rss_peak_mb']:.0f} MB "
               f"(+{run['growth_mb']:.0f}){limit}; exit after SIGINT "

@@ -27,8 +27,12 @@ roadmap markers), cannot refuse a client and, stopping, waits for its clients. H
 - At most ``live.max_clients`` clients at once: one more is refused (HTTP 503, logged at
   most every ``REFUSED_LOG_PERIOD``), and connections still in their opening handshake are
   limited to ``HANDSHAKES`` more (closed at once beyond).
-- Stopping closes every client's socket at once (unsent data is dropped), then the
-  listening one, and waits at most ``STOP_WAIT`` for the server's thread (a daemon).
+- A client's messages are taken at ``INCOMING_RATE`` a second at most: beyond, its socket
+  is not read until their time comes, so that a flood of them cannot keep the server's
+  thread (and the GIL) busy.
+- Stopping shuts every client's socket down at once, from the stopping thread, however busy
+  the server's thread is (unsent data is dropped); then the server's thread closes the
+  listening socket, waited for at most ``STOP_WAIT`` (the thread is a daemon).
 
 So what the view holds per client is at most its outbox, the message being sent (once more,
 in the socket's buffer) and ``INCOMING`` of what it sent (README, "Live view in Foxglove").
@@ -44,6 +48,7 @@ import http
 import ipaddress
 import json
 import logging
+import socket
 import struct
 import threading
 import time
@@ -70,6 +75,8 @@ HANDSHAKES = 8
 """Connections in their opening handshake allowed beyond ``live.max_clients``."""
 INCOMING = (1 << 16, 16)
 """Largest message a client may send (bytes), and how many are buffered from it at most."""
+INCOMING_RATE = 100
+"""Messages a second taken from a client; beyond, it waits (its socket is not read)."""
 OPEN_TIMEOUT = 5.0
 """s a connection may take for its opening handshake."""
 REFUSED_LOG_PERIOD = 10.0
@@ -259,13 +266,16 @@ class _Served:
 
             def connection_made(self, transport) -> None:
                 super().connection_made(transport)
-                served._open.add(self)
-                if len(served._open) > served.max_clients + HANDSHAKES:
+                with served._lock:
+                    served._open[self] = transport.get_extra_info('socket')
+                    over = len(served._open) > served.max_clients + HANDSHAKES
+                if over:
                     served._refused(self, 'connections')
                     transport.abort()
 
             def connection_lost(self, exc) -> None:
-                served._open.discard(self)
+                with served._lock:
+                    served._open.pop(self, None)
                 super().connection_lost(exc)
 
         self.view = view
@@ -275,8 +285,10 @@ class _Served:
         self._lock = threading.Lock()
         """Guards the clients, their subscriptions and outboxes (the executor logs)."""
         self._clients = []
-        self._open = set()
-        """Every connection, from its opening handshake on (only the loop's thread)."""
+        self._open = {}
+        """Every connection, from its opening handshake on, and its socket."""
+        self._halted = threading.Event()
+        """Set once the clients' connections and the listening socket are closed."""
         self._numbers = 0
         self._refusals, self._refused_logged = 0, -REFUSED_LOG_PERIOD
         self._stopped = False
@@ -363,11 +375,19 @@ class _Served:
         with self._lock:
             self._stopped = True
             self._clients = []
+            sockets = list(self._open.values())
+        # At once, from this thread: however busy the server's thread is, no client is
+        # sent or read anything more, and each sees its connection end.
+        for sock in sockets:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:  # not connected (any more)
+                pass
         try:
             self._loop.call_soon_threadsafe(self._halt)
         except RuntimeError:  # closed already
             pass
-        self._thread.join(STOP_WAIT)
+        self._halted.wait(STOP_WAIT)  # the rest ends with the (daemon) thread
 
     # ------------------------------------------------- on the server's thread from here on
 
@@ -384,11 +404,14 @@ class _Served:
             self._loop.close()
 
     def _halt(self) -> None:
-        for connection in list(self._open):
+        with self._lock:
+            connections = list(self._open)
+        for connection in connections:
             connection.transport.abort()
         server = getattr(self, '_server', None)
         if server is not None:
             server.server.close()  # the listening socket, closed now
+        self._halted.set()
         self._loop.stop()
 
     def _put(self, client: _Client, channel: int, now: int, data: bytes) -> bool:
@@ -441,7 +464,12 @@ class _Served:
                 if not await self._send(client, text):
                     return
             writer = asyncio.create_task(self._write(client))
+            began, taken = self._loop.time(), 0
             async for message in connection:
+                taken += 1
+                if taken > INCOMING_RATE:  # a flood: taken at the rate, the rest waits
+                    await asyncio.sleep(max(0.0, began + 1.0 - self._loop.time()))
+                    began, taken = self._loop.time(), 1
                 if isinstance(message, str):
                     self._on_message(client, message)
         except self._closed:
