@@ -20,7 +20,8 @@ roadmap markers), cannot refuse a client and, stopping, waits for its clients. H
   not held up. An outbox holds at most ``OUTBOX_BYTES``: a client that reads too slowly
   loses its oldest messages (logged once per client); the newest is always kept, even alone
   larger than that. A client that has not taken a message for ``STALL`` seconds is
-  disconnected (logged).
+  disconnected (logged); one that has gone without closing is noticed by the next ping
+  (``PING``).
 - The latched messages go to the client that subscribes, at most once per
   ``LATCHED_PERIOD`` per channel and client (one subscribing again sooner gets them when the
   period is up); unsubscribing drops what its outbox still holds for that subscription.
@@ -79,6 +80,9 @@ INCOMING_RATE = 100
 """Messages a second taken from a client; beyond, it waits (its socket is not read)."""
 OPEN_TIMEOUT = 5.0
 """s a connection may take for its opening handshake."""
+PING = (5.0, 20.0)
+"""s between pings to each client (one that has gone is noticed by the next one), and how
+long its answer may take before the client is disconnected."""
 REFUSED_LOG_PERIOD = 10.0
 """s between log lines about refused clients (the first is logged at once)."""
 START_WAIT = 10.0
@@ -259,6 +263,7 @@ class _Served:
         import foxglove.messages  # here: a node without the live view needs neither
         from websockets.asyncio.server import serve, ServerConnection
         from websockets.exceptions import ConnectionClosed
+        from websockets.protocol import State
         served = self
 
         class Connection(ServerConnection):
@@ -282,6 +287,7 @@ class _Served:
         self.max_clients = max_clients
         self._messages = foxglove.messages
         self._closed = ConnectionClosed
+        self._open_state = State.OPEN
         self._lock = threading.Lock()
         """Guards the clients, their subscriptions and outboxes (the executor logs)."""
         self._clients = []
@@ -319,7 +325,8 @@ class _Served:
             return await serve(
                 self._serve_client, host, port, create_connection=Connection,
                 process_request=self._admit, subprotocols=[SUBPROTOCOL], compression=None,
-                open_timeout=OPEN_TIMEOUT, close_timeout=1.0, max_size=INCOMING[0],
+                open_timeout=OPEN_TIMEOUT, ping_interval=PING[0], ping_timeout=PING[1],
+                close_timeout=1.0, max_size=INCOMING[0],
                 max_queue=INCOMING[1], logger=quiet)
 
         self._loop = asyncio.new_event_loop()
@@ -440,7 +447,7 @@ class _Served:
             return
         peer = connection.transport.get_extra_info('peername') or ('?', '?')
         more = self._refusals - 1
-        since = f'; {more} more refused in the last {REFUSED_LOG_PERIOD:g} s' if more else ''
+        since = f'; {more} more refused since the last such line' if more else ''
         limit = f'{self.max_clients} clients' if what == 'clients' else \
             f'{self.max_clients} clients and {HANDSHAKES} opening connections'
         self.view.log.warning(f'live view: a client from {peer[0]}:{peer[1]} refused: '
@@ -470,6 +477,8 @@ class _Served:
                 if taken > INCOMING_RATE:  # a flood: taken at the rate, the rest waits
                     await asyncio.sleep(max(0.0, began + 1.0 - self._loop.time()))
                     began, taken = self._loop.time(), 1
+                if connection.state is not self._open_state:
+                    break  # gone: what it sent before is not waited for
                 if isinstance(message, str):
                     self._on_message(client, message)
         except self._closed:
@@ -503,6 +512,8 @@ class _Served:
             self.view.log.warning(f'live view: {client} disconnected: it has not taken a '
                                   f'message for {STALL:g} s')
             client.connection.transport.abort()
+            return False
+        except self._closed:  # gone: its handler forgets it
             return False
 
     def _on_message(self, client: _Client, text: str) -> None:
