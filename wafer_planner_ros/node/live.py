@@ -30,7 +30,8 @@ roadmap markers), cannot refuse a client and, stopping, waits for its clients. H
   limited to ``HANDSHAKES`` more (closed at once beyond).
 - A client's messages are taken at ``INCOMING_RATE`` a second at most: beyond, its socket
   is not read until their time comes, so that a flood of them cannot keep the server's
-  thread (and the GIL) busy.
+  thread (and the GIL) busy; its socket's receive buffer is ``RECEIVE_BUFFER``, so that one
+  read (parsed whole) stays small.
 - Stopping shuts every client's socket down at once, from the stopping thread, however busy
   the server's thread is (unsent data is dropped); then the server's thread closes the
   listening socket, waited for at most ``STOP_WAIT`` (the thread is a daemon).
@@ -76,6 +77,8 @@ HANDSHAKES = 8
 """Connections in their opening handshake allowed beyond ``live.max_clients``."""
 INCOMING = (1 << 16, 16)
 """Largest message a client may send (bytes), and how many are buffered from it at most."""
+RECEIVE_BUFFER = 8192
+"""Bytes of a client's socket's receive buffer (the kernel may double it)."""
 INCOMING_RATE = 100
 """Messages a second taken from a client; beyond, it waits (its socket is not read)."""
 OPEN_TIMEOUT = 5.0
@@ -271,8 +274,11 @@ class _Served:
 
             def connection_made(self, transport) -> None:
                 super().connection_made(transport)
+                sock = transport.get_extra_info('socket')
+                # What one read takes from a client (all of it parsed at once) stays small.
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
                 with served._lock:
-                    served._open[self] = transport.get_extra_info('socket')
+                    served._open[self] = sock
                     over = len(served._open) > served.max_clients + HANDSHAKES
                 if over:
                     served._refused(self, 'connections')
