@@ -275,8 +275,10 @@ class _Served:
             def connection_made(self, transport) -> None:
                 super().connection_made(transport)
                 sock = transport.get_extra_info('socket')
-                # What one read takes from a client (all of it parsed at once) stays small.
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+                try:  # what one read takes from a client (parsed whole) stays small
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+                except OSError:  # gone already: the next read says so
+                    pass
                 with served._lock:
                     served._open[self] = sock
                     over = len(served._open) > served.max_clients + HANDSHAKES
@@ -324,8 +326,9 @@ class _Served:
                         'sessionId': str(time.time_ns())}),
             json.dumps({'op': 'advertise', 'channels': channels})]
         quiet = logging.getLogger(f'{__name__}.websockets')  # a client's faults: not the node's
-        quiet.addHandler(logging.NullHandler())
         quiet.propagate = False
+        if not quiet.handlers:
+            quiet.addHandler(logging.NullHandler())
 
         async def listen():
             return await serve(
