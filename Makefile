@@ -53,6 +53,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_plan.py
 	$(ENV) $(PY) bench/bench_node.py
 	$(ENV) $(PY) bench/bench_startup.py
+	$(ENV) $(PY) bench/bench_live.py
 	$(ENV) $(PY) bench/bench_cell.py
 	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
 

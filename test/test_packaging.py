@@ -22,7 +22,7 @@ PROVIDES = {
     'python3-rosbags-pip': ['rosbags'], 'python-fcl-pip': ['fcl'],
     'ament_flake8': ['ament_flake8'], 'ament_pep257': ['ament_pep257'],
     'daqp': ['daqp'], 'threadpoolctl': ['threadpoolctl'], 'shapely': ['shapely'],
-    'import-linter': ['importlinter'], 'foxglove-sdk': ['foxglove'],
+    'import-linter': ['importlinter'], 'foxglove-sdk': ['foxglove'], 'websockets': ['websockets'],
     'python-fcl': ['fcl'], 'mcap': ['mcap'], 'rosbags': ['rosbags'],
     'tf2_ros': [],
 }

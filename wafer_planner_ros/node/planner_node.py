@@ -106,7 +106,8 @@ class WaferPlannerNode(Node):
         self._live = LiveView(self.get_fully_qualified_name(), [
             self._roadmap_pub, self._path_pub, self._trajectory_pub, self._result_pub,
             self._diagnostics_pub], self._roadmap_pub, self.log)
-        self._live.start(self.settings.live_host, self.settings.live_port)
+        self._live.start(self.settings.live_host, self.settings.live_port,
+                         self.settings.live_max_clients)
         # Raw: the request's bytes are recorded exactly as they arrived.
         self._joint_sub = self.create_subscription(
             JointTrajectory, '~/plan_request', self._on_joint_request, RELIABLE, raw=True)
@@ -414,7 +415,8 @@ class WaferPlannerNode(Node):
             except Exception as exc:  # noqa: B902 - the parameters are set all the same
                 self.log.error(f'recording the parameters failed: {reason_of(exc)}')
             if any(name.startswith('live.') for name in changed):
-                self._live.start(settings.live_host, settings.live_port)  # never raises
+                self._live.start(settings.live_host, settings.live_port,  # never raises
+                                 settings.live_max_clients)
         return SetParametersResult(successful=True)
 
     def destroy_node(self) -> None:

@@ -73,11 +73,15 @@ PARAMETERS: Tuple[Parameter, ...] = (
               0, 1000000),
     Parameter('markers.frame_id', 'efem', 'frame of the published markers'),
     Parameter('live.port', 0,
-              'TCP port of the Foxglove WebSocket live view (needs foxglove-sdk); 0: off',
+              'TCP port of the Foxglove WebSocket live view (needs foxglove-sdk and '
+              'websockets); 0: off',
               0, 65535),
-    Parameter('live.host', '0.0.0.0',
-              'address the live view listens on (0.0.0.0: every interface; 127.0.0.1: '
-              'this machine only)'),
+    Parameter('live.host', '127.0.0.1',
+              'address the live view listens on (127.0.0.1: this machine only; another, e.g. '
+              '0.0.0.0 for every interface, is logged as a warning: the view has no '
+              'authentication)'),
+    Parameter('live.max_clients', 4,
+              'clients the live view serves at once; one more is refused', 1, 64),
 )
 
 _BY_NAME = {p.name: p for p in PARAMETERS}
@@ -109,6 +113,8 @@ class NodeSettings:
     live_port: int
     """TCP port of the Foxglove live view; 0: off."""
     live_host: str
+    live_max_clients: int
+    """Clients the live view serves at once."""
 
 
 def check(name: str, value) -> None:
@@ -158,4 +164,5 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         recording_max_bag_duration=float(merged['recording.max_bag_duration']),
         recording_keep=merged['recording.keep'],
         frame_id=merged['markers.frame_id'],
-        live_port=merged['live.port'], live_host=merged['live.host'].strip())
+        live_port=merged['live.port'], live_host=merged['live.host'].strip(),
+        live_max_clients=merged['live.max_clients'])
