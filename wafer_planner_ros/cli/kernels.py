@@ -34,7 +34,7 @@ def main(argv=None) -> int:
         print(f'planning kernels: {loaded} signatures of {len(kernels.registered())} kernels '
               f'loaded from {where} in {time.monotonic() - begun:.2f} s')
         return EXIT_OK
-    print(f'compiling the planning kernels into {where} (once per install, about 30 s on '
+    print(f'compiling the planning kernels into {where} (once per install, about 40 s on '
           'two cores):', flush=True)
 
     def progress(step: str) -> None:

@@ -33,7 +33,7 @@ def kernels_announced(logger):
     Log, while the body runs, that the compiled kernels are being compiled, if they are.
 
     Loading them from numba's cache takes a fraction of a second; compiling them, when the
-    set-up did not (``wafer-kernels``), about 30 s: that is announced after
+    set-up did not (``wafer-kernels``), about 40 s: that is announced after
     ``ANNOUNCE_AFTER`` seconds, with progress every ``ANNOUNCE_EVERY`` seconds.
     """
     done, begun, before = threading.Event(), time.monotonic(), kernels.compiled_count()
@@ -47,7 +47,7 @@ def kernels_announced(logger):
             if not announced:
                 logger.info('compiling the planning kernels for this machine: not found in '
                             f'{kernels.cache_root()} (`wafer-kernels` compiles them ahead, '
-                            'as the set-up does); about 30 s, requests are answered '
+                            'as the set-up does); about 40 s, requests are answered '
                             'ROADMAP_NOT_READY meanwhile')
                 announced = True
                 continue

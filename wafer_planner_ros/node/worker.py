@@ -263,7 +263,7 @@ class PlanningWorker:
     def _not_ready(self) -> str:
         """Return why the node cannot answer yet; call with the lock held."""
         if self._compiling:
-            return ('the planning kernels are being compiled for this machine (about 30 s; '
+            return ('the planning kernels are being compiled for this machine (about 40 s; '
                     '`wafer-kernels` compiles them ahead)')
         if self.load_failed and not self._loading:
             return f'roadmap not loaded: {self.last_load_error}'
