@@ -11,7 +11,15 @@ curve. The edits, each to one entry's curve:
   from 0 it first runs its first polynomial backwards, through the wall);
 - ``nudged``: the second control point moved by 0.02 rad, a motion that does not start at
   rest;
-- ``nan``: a NaN in a control point and, in a file that stores figures, in one of them.
+- ``nan``: a NaN in a control point and, in a file that stores figures, in one of them;
+- ``slowed``: every knot times 1000, a curve within every limit that lasts about an hour
+  (checking it would take seconds and hundreds of megabytes);
+
+and, the curve left as it is, to what an answer reports besides it:
+
+- ``initial``: a NaN initial (λ-scaled start's) cycle time;
+- ``counted``: a NaN planning count and a false method;
+- ``path``: a roadmap path that leaves the curve's ends.
 """
 
 import hashlib
@@ -41,7 +49,25 @@ def _nan(entry: dict) -> None:
         entry['verification']['ratios']['velocity'] = float('nan')
 
 
-EDITS = {'halved': _halved, 'shifted': _shifted, 'nudged': _nudged, 'nan': _nan}
+def _slowed(entry: dict) -> None:
+    spline = entry['trajectory']
+    spline['knots'] = [1000.0 * t for t in spline['knots']]
+
+
+def _initial(entry: dict) -> None:
+    entry['initial_cycle_time'] = float('nan')
+
+
+def _counted(entry: dict) -> None:
+    entry['metrics'].update(budget=float('nan'), method='forged')
+
+
+def _path(entry: dict) -> None:
+    entry['roadmap_path'] = [[9.0, 9.0, 9.0]] + entry['roadmap_path'][1:]
+
+
+EDITS = {'halved': _halved, 'shifted': _shifted, 'nudged': _nudged, 'nan': _nan,
+         'slowed': _slowed, 'initial': _initial, 'counted': _counted, 'path': _path}
 """Kind of edit -> what it does to a stored entry."""
 
 

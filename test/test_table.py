@@ -172,6 +172,10 @@ TAMPERED = ('loadport1', 'loadlock2')
     ('shifted', r'the first four knots are \[0.3, 0.3, 0.3, 0.3\], not 0'),
     ('nudged', 'control point 1 is .*, not the start .*: the motion does not start at rest'),
     ('nan', 'control point [0-9]+ is .*nan.*, not finite'),
+    ('slowed', r'its curve lasts [0-9.]+ s, over 60 s'),
+    ('initial', 'its initial cycle time nan is not a finite time'),
+    ('counted', 'its planning counts are not all finite numbers or flags'),
+    ('path', "its roadmap_path is not a path from the curve's start to its end"),
 ])
 def test_a_tampered_entry_is_rejected_never_published(planner, built, default_cell,
                                                       roadmap_cache, tmp_path, kind, words):
@@ -198,6 +202,25 @@ def test_a_tampered_entry_is_rejected_never_published(planner, built, default_ce
         built.answer(planner, *TAMPERED).cycle_time, rel=1e-12)
     stored = load_table(planner, tmp_path)
     assert stored.loaded and not stored.rejected and set(stored.entries) == set(built.entries)
+
+
+def test_a_forged_method_is_not_reported(planner, built, tmp_path):
+    """What an answer measures on its curve (method, lengths, counts of it) is never read."""
+    save_table(built, tmp_path)
+    document = json.loads(table_path(tmp_path, built.key).read_text())
+    for entry in document['entries']:
+        entry['metrics'].update(method='forged', joint_path_length=-1.0, control_points=0)
+    document['digest'] = digest(document['entries'], document['failures'])
+    table_path(tmp_path, built.key).write_text(json.dumps(document))
+    loaded = load_table(planner, tmp_path)
+    assert not loaded.rejected
+    for pair in built.entries:
+        metrics, truth = loaded.answer(planner, *pair).metrics, built.answer(planner, *pair)
+        assert metrics['method'] == planner.method.name == truth.metrics['method'] \
+            == loaded.method
+        assert metrics['joint_path_length'] == pytest.approx(
+            truth.metrics['joint_path_length'], rel=1e-12)
+        assert metrics['control_points'] == len(truth.trajectory.control_points)
 
 
 def test_the_figures_published_are_the_curves_own(planner, built, default_cell, tmp_path):

@@ -1,22 +1,22 @@
 """
 Compiled kernels: numba functions that import numba only when one is first called.
 
-Importing numba and loading its first kernel costs about 0.3 s, more than half of the
-node's start-up budget; the node is ready before any kernel runs and loads them just after
-(``node.worker``, ``node.serving.warm_up``). A function decorated with :func:`kernel` is a
-:class:`Kernel`: calling it calls its numba dispatcher (``numba.njit(cache=True, ...)``),
-made on the first call. The dispatcher is made from a copy of the function whose globals
-name the compiled form of every other kernel it calls, so kernels call kernels in compiled
-code as numba functions do. ``Kernel.interpreted`` runs the same code as plain Python (the
-kernels it calls interpreted too): a cell file's polygons and its stations' clearances are
-checked that way when they are small (``sized``), so that reading a cell needs no numba.
+Importing numba and loading the kernels from its cache costs about a second: the node
+starts it as its process starts (``node.startup``) and is ready once it is done. A function
+decorated with :func:`kernel` is a :class:`Kernel`: calling it calls its numba dispatcher
+(``numba.njit(cache=True, ...)``), made on the first call. The dispatcher is made from a
+copy of the function whose globals name the compiled form of every other kernel it calls,
+so kernels call kernels in compiled code as numba functions do. ``Kernel.interpreted`` runs
+the same code as plain Python (the kernels it calls interpreted too): a cell file's
+polygons and its stations' clearances are checked that way when they are small (``sized``),
+so that reading a cell needs no numba.
 :data:`objmode` stands for ``numba.objmode`` in a kernel (a no-op when interpreted).
 
 Where numba keeps them: ``NUMBA_CACHE_DIR`` when it is set, else :func:`cache_root`
 (``$XDG_CACHE_HOME/wafer_planner_ros/numba``, by default ``~/.cache/...``), the same for the
 node and every tool whatever their other cache directories, set when numba is first imported
 here. ``wafer-kernels`` compiles every kernel into it once after an install
-(``service.kernel_warmup``); :func:`load_cached` then loads them all in a fraction of a second,
+(``service.warmup``); :func:`load_cached` then loads them all in about a second,
 and :func:`uncached` names the kernels that would still compile.
 
 Only this module imports numba (a contract in ``setup.cfg``).

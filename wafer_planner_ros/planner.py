@@ -307,15 +307,11 @@ class Planner:
                 timings_ms: dict) -> PlanResult:
         """Return the verified candidate sampled and measured."""
         pair, trajectory = candidate.pair, candidate.shaped.trajectory
-        dense = trajectory.evaluate(np.linspace(0.0, trajectory.duration, 2001))
-        wafer = self.cell.robot.arm.wafer_center(dense)
         metrics = dict(
             candidate.shaped.metrics, method=self.method.name,
             roadmap_path_vertices=len(pair.roadmap_path), path_vertices=len(pair.path),
             control_points=pair.control_points, branches=list(pair.branches),
-            joint_path_length=float(np.linalg.norm(np.diff(dense, axis=0), axis=1).sum()),
-            wafer_path_length=float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum()),
-            **counts)
+            **path_lengths(self.cell, trajectory), **counts)
         times, positions, velocities, accelerations = trajectory.samples(
             self.settings.sample_period)
         return PlanResult(
@@ -324,6 +320,14 @@ class Planner:
             verification=checked, times=times, positions=positions, velocities=velocities,
             accelerations=accelerations, roadmap_path=pair.roadmap_path, path=pair.path,
             metrics=metrics, timings_ms=timings_ms, warnings=candidate.shaped.warnings)
+
+
+def path_lengths(cell, trajectory) -> dict:
+    """Return a trajectory's ``joint_path_length`` (rad) and ``wafer_path_length`` (m)."""
+    dense = trajectory.evaluate(np.linspace(0.0, trajectory.duration, 2001))
+    wafer = cell.robot.arm.wafer_center(dense)
+    return {'joint_path_length': float(np.linalg.norm(np.diff(dense, axis=0), axis=1).sum()),
+            'wafer_path_length': float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum())}
 
 
 @dataclass(frozen=True, eq=False)

@@ -84,6 +84,7 @@ def build_station_table(planner: Planner, settings, logger,
 
 
 def _whole_curve(planner: Planner) -> Planner:
+    """Return the planner with the whole-curve optimisation as its method."""
     return Planner(planner.cell, planner.roadmap,
                    replace(planner.settings, method='whole-curve'))
 
@@ -121,7 +122,6 @@ def plan_request(planner: Planner, table: Optional[StationTable], request, setti
     budget = min(settings.optimise_budget, 0.5 * (deadline - time.monotonic()))
     if stations or budget < MIN_BUDGET:
         return planner.plan(request.start, request.goal, deadline=deadline)
-    whole = Planner(planner.cell, planner.roadmap,
-                    replace(planner.settings, method='whole-curve'))
-    result = whole.plan(request.start, request.goal, deadline=deadline, budget=budget)
+    result = _whole_curve(planner).plan(request.start, request.goal, deadline=deadline,
+                                        budget=budget)
     return replace(result, metrics=dict(result.metrics, budget=budget))

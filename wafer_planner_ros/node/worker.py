@@ -281,8 +281,11 @@ class PlanningWorker:
                 if item[0] not in self._open:
                     continue  # answered TIMEOUT while it waited
                 self._planned.add(item[0])
+                # Its roadmap, resolved as it leaves the queue (``_serving_for`` frees the
+                # previous roadmap once no queued request needs it).
+                serving = self._serving_for(item[3])
             try:
-                self._plan(*item)
+                self._plan(serving, *item[:3])
             except Exception as exc:  # noqa: B902 - the thread outlives any one request
                 self._logger.error(f'planning thread: {reason_of(exc)}')
             finally:
@@ -314,9 +317,18 @@ class PlanningWorker:
                                   f'its receipt: {doing}', request.start, request.goal)
 
     def _claim(self, number: int) -> bool:
-        """Return True once for an open query (it is then answered), False if answered."""
+        """
+        Return True once for an open query (it is then answered), else False.
+
+        False too once its deadline has come: the watchdog answers it ``TIMEOUT`` then,
+        however late its own turn.
+        """
         with self.lock:
-            return self._open.pop(number, None) is not None
+            entry = self._open.get(number)
+            if entry is None or time.monotonic() >= entry[1]:
+                return False
+            del self._open[number]
+            return True
 
     def _serving_for(self, received_ns: int) -> Optional[Serving]:
         """Return the roadmap in force at ``received_ns``; call with the lock held."""
@@ -327,17 +339,17 @@ class PlanningWorker:
             return previous
         if previous is not None and serving is not None \
                 and time.time_ns() - serving.loaded_ns > PREVIOUS_KEPT_NS \
-                and all(item[3] >= serving.loaded_ns for item in self._backlog):
+                and all(item[3] >= serving.loaded_ns for queued in (self._backlog, self._lane)
+                        for item in queued):
             self._previous = None  # no request needs it any more: free its memory
         return serving
 
-    def _plan(self, number: int, request, received: float, received_ns: int) -> None:
-        """Answer one queued request, unless the watchdog has (then the plan is dropped)."""
+    def _plan(self, serving: Serving, number: int, request, received: float) -> None:
+        """Answer a request on ``serving``, unless the watchdog has (the plan is then dropped)."""
         roadmap, begun, doing = None, None, 'planning'
         try:
             settings = self._settings()
             with self.lock:
-                serving = self._serving_for(received_ns)
                 deadline = self._open.get(number, (None, received + settings.timeout))[1]
             planner, roadmap = serving.planner, serving.cached.roadmap
             joints = planner.cell.robot.joint_names

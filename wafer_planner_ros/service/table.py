@@ -14,9 +14,12 @@ a stale, foreign or corrupt file is reported and rebuilt, never trusted. The dig
 against damage, not against a deliberate edit, so every curve is then verified in full as
 if just planned (``verify``: well formed and at rest exactly on its two stations on the
 branches it names, every limit, the proof and the dense collision check over all of
-[0, T]): about 4 ms an entry, the default cell's 12 loaded in a median 43-53 ms (20 loads
-in process, on 2 cores shared with other work). What an answer reports is that
-verification, never a figure from the file. An entry that fails is left out and listed in
+[0, T]; a curve over ``MAX_DURATION`` is rejected before): about 2.6 ms an entry, the
+default cell's 12 loaded in a median 31 ms. What an answer reports is that verification
+and what it measures on the curve (its method, lengths, counts of points), never a figure
+of the file's; the rest an answer takes from the file (the λ-scaled start's cycle time,
+the paths behind the curve, the warnings and planning counts) is checked for what it can
+be (``_described``). An entry that fails is left out and listed in
 ``rejected`` with the reason, never answered from; ``build_table`` given the loaded table
 plans those pairs again (``load_or_build_table`` does, and stores the table). Files are
 written to a temporary name and renamed, so a crash never leaves half a file.
@@ -37,7 +40,7 @@ import numpy as np
 from wafer_planner_ros import __version__
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
-from wafer_planner_ros.planner import Planner, PlanResult
+from wafer_planner_ros.planner import path_lengths, Planner, PlanResult
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
@@ -47,6 +50,16 @@ TMP_SUFFIX = '.tmp'
 FORMAT = 2
 """The layout of a table file. Format 1 stored each entry's verification figures and
 answered with them; format 2 stores none, they are computed on load."""
+MAX_DURATION = 60.0
+"""s: a stored curve longer than this is rejected before it is checked (the planner's
+station moves take seconds; checking a curve costs time and memory in proportion to it)."""
+MAX_ITEMS = 10000
+"""Most vertices of a stored path, or warnings or counts of an entry."""
+MAX_TEXT = 1000
+"""Most characters of a stored warning or count's name."""
+MEASURED = ('method', 'roadmap_path_vertices', 'path_vertices', 'control_points', 'branches',
+            'joint_path_length', 'wafer_path_length')
+"""Metrics an answer from the table measures on what it answers with, never read."""
 
 
 class TableError(Exception):
@@ -72,6 +85,9 @@ class StationTable:
     """Wall time to build or load (s)."""
     loaded: bool = False
     """Whether it came from the cache as it is (no pair planned)."""
+    method: str = 'whole-curve'
+    """The curve method of the planner it was planned for (part of its key): what its
+    answers report."""
 
     def __len__(self) -> int:
         """Return the number of pairs in the table."""
@@ -83,7 +99,8 @@ class StationTable:
         if entry is None:
             return None
         begun = time.perf_counter()
-        result = _result(planner, (start, goal), entry, self.verified[(start, goal)])
+        result = _result(planner, (start, goal), entry, self.verified[(start, goal)],
+                         self.method)
         spent = (time.perf_counter() - begun) * 1000.0
         return replace(result, timings_ms={'table': spent, 'total': spent})
 
@@ -134,7 +151,8 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
             progress(done, len(pairs), f'{start}->{goal}')
     return StationTable(table_key(planner), entries, verified, failures,
                         {} if loaded is None else dict(loaded.rejected),
-                        time.perf_counter() - begun + (0.0 if loaded is None else loaded.seconds))
+                        time.perf_counter() - begun + (0.0 if loaded is None else loaded.seconds),
+                        method=planner.method.name)
 
 
 def save_table(table: StationTable, cache_dir) -> Path:
@@ -207,7 +225,7 @@ def load_table(planner: Planner, cache_dir) -> StationTable:
         raise TableError(f'{path} lacks {len(missing)} station pairs, e.g. '
                          f'{"->".join(sorted(missing)[0])}')
     return StationTable(key, table, verified, failed, rejected, time.perf_counter() - begun,
-                        loaded=True)
+                        loaded=True, method=planner.method.name)
 
 
 def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> StationTable:
@@ -284,12 +302,53 @@ def _verified(planner: Planner, pair, entry: dict) -> Verification:
     """
     Return the full verification of a stored entry's curve, from its stations (``verify``).
 
-    Raise if the entry cannot be read, or cannot be made into an answer.
+    Raise ValueError if the entry cannot be read, its curve is longer than ``MAX_DURATION``,
+    or a field an answer takes from it is unfit (``_described``).
     """
-    checked = verify(_curve(entry), planner.cell, *_ends(planner, pair, entry['branches']))
+    curve = _curve(entry)
+    if not curve.duration <= MAX_DURATION:
+        raise ValueError(f'its curve lasts {curve.duration:.6g} s, over {MAX_DURATION:g} s')
+    checked = verify(curve, planner.cell, *_ends(planner, pair, entry['branches']))
     if checked.ok:
-        _result(planner, pair, entry, checked)  # every other field readable as well
+        _described(curve, entry)
     return checked
+
+
+def _described(curve: CubicBSpline, entry: dict) -> dict:
+    """
+    Return what an answer takes from a stored entry besides its verified curve, checked.
+
+    Raise ValueError unless: the initial (λ-scaled start's) cycle time is finite and no
+    shorter than the curve; the roadmap path and the path are finite (n, 3) arrays from the
+    curve's start to its end; the warnings are texts; the planning counts are numbers or
+    flags. ``MEASURED`` metrics are not read: the caller measures them.
+    """
+    initial = float(entry['initial_cycle_time'])
+    if not curve.duration <= initial < np.inf:
+        raise ValueError(f'its initial cycle time {initial!r} is not a finite time at least '
+                         f"the curve's {curve.duration:.6g} s")
+    paths = {}
+    for name in ('roadmap_path', 'path'):
+        path = np.asarray(entry[name], float)
+        if path.ndim != 2 or path.shape[1] != 3 or not 2 <= len(path) <= MAX_ITEMS \
+                or not np.all(np.isfinite(path)) \
+                or not np.allclose(path[[0, -1]], curve.control_points[[0, -1]], rtol=0.0,
+                                   atol=1e-9):
+            raise ValueError(f"its {name} is not a path from the curve's start to its end")
+        paths[name] = path
+    warnings = entry['warnings']
+    if not isinstance(warnings, list) or len(warnings) > MAX_ITEMS or not all(
+            isinstance(text, str) and len(text) <= MAX_TEXT for text in warnings):
+        raise ValueError('its warnings are not a list of texts')
+    counts = {name: value for name, value in entry['metrics'].items() if name not in MEASURED}
+    if len(counts) > MAX_ITEMS or not all(
+            isinstance(name, str) and len(name) <= MAX_TEXT and (
+                isinstance(value, bool) or isinstance(value, int)
+                or isinstance(value, float) and np.isfinite(value))
+            for name, value in counts.items()):
+        raise ValueError('its planning counts are not all finite numbers or flags')
+    return {'initial_cycle_time': initial, 'warnings': tuple(warnings), 'counts': counts,
+            **paths}
 
 
 def _ends(planner: Planner, pair, branches) -> list:
@@ -308,20 +367,27 @@ def _curve(entry: dict) -> CubicBSpline:
                         np.asarray(spline['control_points'], float))
 
 
-def _result(planner: Planner, pair, entry: dict, verification: Verification) -> PlanResult:
+def _result(planner: Planner, pair, entry: dict, verification: Verification,
+            method: str) -> PlanResult:
     """Return the PlanResult of a stored entry, sampled at the planner's period."""
     trajectory = _curve(entry)
+    described = _described(trajectory, entry)
     start, goal = (planner.endpoint(name, role) for name, role in zip(pair, ('start', 'goal')))
     times, positions, velocities, accelerations = trajectory.samples(
         planner.settings.sample_period)
+    branches = [int(branch) for branch in entry['branches']]
+    metrics = dict(
+        described['counts'], method=method,
+        roadmap_path_vertices=len(described['roadmap_path']),
+        path_vertices=len(described['path']), control_points=len(trajectory.control_points),
+        branches=branches, **path_lengths(planner.cell, trajectory), source='table')
     return PlanResult(
         start=start, goal=goal, start_q=trajectory.control_points[0],
-        goal_q=trajectory.control_points[-1], branches=tuple(entry['branches']),
-        trajectory=trajectory, initial_cycle_time=entry['initial_cycle_time'],
+        goal_q=trajectory.control_points[-1], branches=tuple(branches),
+        trajectory=trajectory, initial_cycle_time=described['initial_cycle_time'],
         verification=verification, times=times, positions=positions, velocities=velocities,
-        accelerations=accelerations, roadmap_path=np.asarray(entry['roadmap_path'], float),
-        path=np.asarray(entry['path'], float), metrics=dict(entry['metrics'], source='table'),
-        warnings=tuple(entry['warnings']))
+        accelerations=accelerations, roadmap_path=described['roadmap_path'],
+        path=described['path'], metrics=metrics, warnings=described['warnings'])
 
 
 def _digest(entries: list) -> str:

@@ -8,8 +8,8 @@ a small roadmap, planning a station pair and a joint pair by each curve method, 
 proving (a curve and the same curve backwards, as the station table answers the way
 back) and naming contacts. ``wafer-kernels`` runs it once after an install (the
 README's set-up does); the node and the tools then only load the kernels
-(``kernels.load_cached``, a fraction of a second), and ``ready_kernels`` is what the node
-does at start-up: load them, and compile the missing ones only if some are missing (after
+(``kernels.load_cached``, about a second), and ``node.startup.kernels_ready`` is what the
+node does at start-up: load them, and compile the missing ones only if some are missing (after
 an upgrade of the package, or on another machine).
 """
 
