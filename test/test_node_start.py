@@ -214,17 +214,26 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
             time.sleep(3 * timeout)
         return planned(planner, table, request, settings, deadline)
     monkeypatch.setattr(worker, 'plan_request', stalled)
-    table_node.node.set_parameters([Parameter('planning.timeout', value=timeout)])
+    table_node.node.set_parameters([Parameter('planning.timeout', value=timeout),
+                                    Parameter('planning.max_queue', value=3)])
     try:
         ids = [f'late{k}' for k in range(4)]
         sent = {}
-        for request_id, (start, goal) in zip(ids, _far_joint_requests(default_cell, 4)):
+        pairs = _far_joint_requests(default_cell, 5)
+        for request_id, (start, goal) in zip(ids, pairs):
             sent[request_id] = time.monotonic()
             table_node.send_joints(request_id, start, goal)
         arrived = _arrivals(table_node, ids, 120.0)
+        # The three answered TIMEOUT while they waited no longer fill the queue.
+        queued = table_node.status()['queue']
+        table_node.send_joints('after', *pairs[4])
+        _arrivals(table_node, ['after'], 120.0)
         time.sleep(3 * timeout)  # the stalled plan ends: its answer must not go out
     finally:
-        table_node.node.set_parameters([Parameter('planning.timeout', value=30.0)])
+        table_node.node.set_parameters([Parameter('planning.timeout', value=30.0),
+                                        Parameter('planning.max_queue', value=32)])
+    assert queued == 0
+    assert values(table_node.result('after'))['code'] != 'BUSY'
     codes = {i: values(table_node.result(i))['code'] for i in ids}
     assert set(codes.values()) == {'TIMEOUT'}, codes  # all waited behind the stalled one
     late = {i: round(arrived[i] - sent[i], 3) for i in ids}

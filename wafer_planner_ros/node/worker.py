@@ -137,7 +137,7 @@ class PlanningWorker:
                     self._lane if self._held(serving, request) else self._backlog
                 if waiting is None:
                     code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {self._not_ready()}'
-                elif len(waiting) >= settings.max_queue:
+                elif self._waiting(waiting) >= settings.max_queue:
                     code = ErrorCode.BUSY
                     message = (f'busy: {settings.max_queue} requests are already waiting '
                                '(planning.max_queue)')
@@ -225,7 +225,7 @@ class PlanningWorker:
                 'edges': roadmap.edge_count if roadmap is not None else 0,
                 'hash': roadmap.digest if roadmap is not None else '',
                 'seed': roadmap.seed if roadmap is not None else settings.seed,
-                'queue': len(self._backlog),
+                'queue': self._waiting(self._backlog),
                 'served': self.counts['served'], 'failed': self.counts['failed'],
                 'last_error': self.last_error,
                 'rebuild_failed': self.load_failed,
@@ -315,6 +315,10 @@ class PlanningWorker:
                 self.answer_error(number, request.request_id, ErrorCode.TIMEOUT,
                                   f'not answered within planning.timeout ({timeout:g} s) of '
                                   f'its receipt: {doing}', request.start, request.goal)
+
+    def _waiting(self, queue: deque) -> int:
+        """Return how many of ``queue``'s requests wait unanswered; call with the lock held."""
+        return sum(item[0] in self._open for item in queue)
 
     def _claim(self, number: int) -> bool:
         """

@@ -14,7 +14,7 @@ a stale, foreign or corrupt file is reported and rebuilt, never trusted. The dig
 against damage, not against a deliberate edit, so every curve is then verified in full as
 if just planned (``verify``: well formed and at rest exactly on its two stations on the
 branches it names, every limit, the proof and the dense collision check over all of
-[0, T]; a curve over ``MAX_DURATION`` is rejected before): about 2.6 ms an entry, the
+[0, T]; a curve over ``MAX_DURATION`` is rejected before): about 2.5 ms an entry, the
 default cell's 12 loaded in a median 31 ms. What an answer reports is that verification
 and what it measures on the curve (its method, lengths, counts of points), never a figure
 of the file's; the rest an answer takes from the file (the λ-scaled start's cycle time,
