@@ -133,6 +133,15 @@ class Client:
         await self.connection.close()
 
 
+def _warnings_of(view, monkeypatch) -> list:
+    """Return the list the live view's warnings go to from now on (and to its log)."""
+    warnings, log = [], view.log
+    monkeypatch.setattr(view, 'log', SimpleNamespace(
+        info=log.info, error=log.error,
+        warning=lambda text: (warnings.append(text), log.warning(text))))
+    return warnings
+
+
 def _url(harness) -> str:
     url = harness.status()['live']
     assert url, harness.status()['live_error']
@@ -439,10 +448,7 @@ def test_clients_that_subscribe_and_unsubscribe_without_reading_neither_grow_nor
 
 def test_one_client_more_than_live_max_clients_is_refused_and_logged(harness, monkeypatch):
     view = harness.node._live
-    warnings, log = [], view.log
-    monkeypatch.setattr(view, 'log', SimpleNamespace(
-        info=log.info, error=log.error,
-        warning=lambda text: (warnings.append(text), log.warning(text))))
+    warnings = _warnings_of(view, monkeypatch)
     assert harness.node.set_parameters([Parameter('live.max_clients', value=2)])[0].successful
     port = harness.node.settings.live_port
     for bad in (0, 65):
@@ -507,10 +513,7 @@ def test_a_slow_client_loses_its_oldest_messages_its_outbox_bounded_in_bytes(mon
 
 def test_a_client_that_takes_nothing_is_disconnected_and_logged(harness, monkeypatch):
     view = harness.node._live
-    warnings, log = [], view.log
-    monkeypatch.setattr(view, 'log', SimpleNamespace(
-        info=log.info, error=log.error,
-        warning=lambda text: (warnings.append(text), log.warning(text))))
+    warnings = _warnings_of(view, monkeypatch)
     monkeypatch.setattr(live, 'STALL', 1.0)
     stalled = _Raw(harness.node.settings.live_port, receive_buffer=4096)
     try:
