@@ -15,8 +15,10 @@ The node is started as a process (``wafer_planner_node``) with the packaged para
    the same two first requests, then SIGTERM while the station table is being planned, and
    how long until the process has ended.
 3. The first start after an install: ``wafer-kernels`` into an empty numba cache (its
-   time), then a node start on it (ready); and a node started on an empty numba cache
-   without the set-up's compile: the compile announced, and when it is ready.
+   time: the compile and the build ahead of time), then a node start on it (ready); the
+   same without the build ahead of time (numba's cache only); and a node started on an
+   empty numba cache without the set-up's compile: the compile announced, and when it is
+   ready.
 
 Prints a table; writes ``bench/results/startup.json``. Usage:
 ``python bench/bench_startup.py [--starts N]``.
@@ -29,6 +31,7 @@ from pathlib import Path
 import platform
 import queue
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -114,10 +117,17 @@ def environment(numba_cache: str = '') -> dict:
 def ready_and_first_answers(node: Started, timeout: float) -> dict:
     """Wait for ``ready:``; ask the first station and joint requests; return the figures."""
     seen, line = node.wait_for(READY_LINE, timeout)
-    found = {'ready': float(READY.search(line).group(1)), 'seen': seen}
+    found = {'ready': float(READY.search(line).group(1)), 'seen': seen,
+             'kernels': kernels_line(node)}
     found['station'] = node.ask(*STATION)
     found['joint'] = node.ask(*JOINT)
     return found
+
+
+def kernels_line(node: Started) -> str:
+    """Return what the node said of its kernels' load (before ``ready:``)."""
+    said = [line for line in node.log if 'planning kernels loaded in' in line]
+    return said[-1].split(']: ', 1)[-1] if said else ''
 
 
 def main() -> int:
@@ -141,7 +151,7 @@ def main() -> int:
               f"first station {found['station']['code']} in {found['station']['node_ms']:.1f}"
               f" ms, first joint {found['joint']['code']} in "
               f"{found['joint']['node_ms']:.1f} ms; exit {found['exit_after_sigint']:.2f} s "
-              'after SIGINT', flush=True)
+              f"after SIGINT ({found['kernels']})", flush=True)
     fresh = Started(environment(), tempfile.mkdtemp(prefix='bench_startup_fresh_'),
                     recordings)
     cold = ready_and_first_answers(fresh, 300.0)
@@ -159,6 +169,15 @@ def main() -> int:
     install = {'wafer_kernels_s': time.monotonic() - begun}
     node = Started(environment(empty), cache, recordings)
     install['ready_after'] = float(READY.search(node.wait_for(READY_LINE, 120.0)[1]).group(1))
+    install['kernels'] = kernels_line(node)
+    node.stop(signal.SIGINT)
+    # The same without the build ahead of time (another Python, numpy, numba or processor,
+    # or edited kernels): numba's cache.
+    shutil.rmtree(Path(empty) / 'ahead-of-time')
+    node = Started(environment(empty), cache, recordings)
+    install['ready_numba_cache'] = float(
+        READY.search(node.wait_for(READY_LINE, 120.0)[1]).group(1))
+    install['kernels_numba_cache'] = kernels_line(node)
     node.stop(signal.SIGINT)
     node = Started(environment(tempfile.mkdtemp(prefix='bench_startup_numba_')), cache,
                    recordings)
@@ -167,7 +186,9 @@ def main() -> int:
     unset['ready'] = float(READY.search(node.wait_for(READY_LINE, 600.0)[1]).group(1))
     node.stop(signal.SIGINT)
     print(f"after an install: wafer-kernels {install['wafer_kernels_s']:.1f} s, then ready "
-          f"{install['ready_after']:.2f} s; without it the node announces the compile at "
+          f"{install['ready_after']:.2f} s ({install['kernels']}); without the build ahead of "
+          f"time ready {install['ready_numba_cache']:.2f} s ({install['kernels_numba_cache']})"
+          '; without wafer-kernels the node announces the compile at '
           f"{unset['announced']:.1f} s and is ready at {unset['ready']:.1f} s", flush=True)
 
     def median(values):

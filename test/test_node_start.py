@@ -108,6 +108,7 @@ def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends
             [sys.executable, '-c', _STATUS], env=dds_env, capture_output=True, text=True,
             timeout=120).stdout)
         assert status['kernels_compiled'] == 0, status
+        assert status['kernels_ahead'] > 0, status  # the set-up's build, loaded
         # The station table is still being planned (seconds per pair): stop the node now.
         node.wait_for('station table: 1/', 120.0)
         seconds = node.stop(signal.SIGTERM)

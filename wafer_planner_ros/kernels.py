@@ -19,15 +19,32 @@ here. ``wafer-kernels`` compiles every kernel into it once after an install
 (``service.warmup``); :func:`load_cached` then loads them all in about a second,
 and :func:`uncached` names the kernels that would still compile.
 
-Only this module imports numba (a contract in ``setup.cfg``).
+Ahead of time: ``wafer-kernels`` also builds every kernel it can into one extension module
+for this machine (``kernels_ahead``, numba's ``pycc``), kept beside numba's cache
+(:func:`ahead_directory`). :func:`load_ahead` loads it in a few milliseconds without
+importing numba, and a kernel called with arguments of a type it was built for runs the
+built code; any other call goes to numba as above. The build is used only by the Python,
+numpy and numba it was built with, on the same processor (:func:`ahead_identity`), and
+only while the kernels' code is what it was built from (:func:`kernels_digest`): anything
+else finds no build and uses numba.
+
+Only this module and the build (``kernels_ahead``) import numba (a contract in
+``setup.cfg``).
 """
 
 import contextlib
+import hashlib
+import importlib.util
+import json
 import os
 from pathlib import Path
+import platform
+import sys
 import threading
 import types
-from typing import Callable, List
+from typing import Callable, List, Optional
+
+import numpy as np
 
 _LOCK = threading.RLock()
 _KERNELS: List['Kernel'] = []
@@ -55,6 +72,11 @@ class Kernel:
         self.options = {'cache': True, **options}
         self._compiled = None
         self._interpreted = None
+        self._ahead: Optional[dict] = None
+        """Argument types (``argument_types``) -> the built function (``load_ahead``)."""
+        code = function.__code__
+        self._arity = code.co_argcount
+        self._defaults = function.__defaults__ or ()
         self.__name__ = function.__name__
         self.__qualname__ = function.__qualname__
         self.__doc__ = function.__doc__
@@ -62,7 +84,20 @@ class Kernel:
         self.__wrapped__ = function
 
     def __call__(self, *args):
-        """Call the compiled kernel (numba is imported and the kernel made, first time)."""
+        """
+        Call the compiled kernel: built ahead of time for these argument types, or numba's.
+
+        Numba is imported and the kernel made the first time a call needs it.
+        """
+        ahead = self._ahead
+        if ahead is not None:
+            if len(args) < self._arity:  # built with every argument: the defaults added
+                args_all = args + self._defaults[len(args) - self._arity:]
+            else:
+                args_all = args
+            function = ahead.get(argument_types(args_all))
+            if function is not None:
+                return function(*args_all)
         compiled = self._compiled
         if compiled is None:
             compiled = self.compiled
@@ -115,6 +150,10 @@ class Kernel:
         for signature in signatures:
             dispatcher.compile(signature)  # found in the cache: loaded, not compiled
         return len(signatures)
+
+    def ahead(self) -> int:
+        """Return how many signatures of this kernel this process has built ahead of time."""
+        return len(self._ahead or ())
 
     def signatures(self) -> list:
         """Return the signatures this process has of the kernel (compiled or loaded)."""
@@ -178,7 +217,7 @@ def load_cached() -> int:
 
 def uncached() -> List['Kernel']:
     """
-    Return the kernels that a call would still compile (after ``load_cached``).
+    Return the kernels that a call would still compile (after ``load_cached``, ``load_ahead``).
 
     Those without any signature that no other kernel calls: a kernel called only from
     compiled code is compiled into its callers and has no signature of its own.
@@ -186,7 +225,8 @@ def uncached() -> List['Kernel']:
     everything = registered()
     called = {id(value) for k in everything for name in k.function.__code__.co_names
               if isinstance(value := k.function.__globals__.get(name), Kernel)}
-    return [k for k in everything if not k.signatures() and id(k) not in called]
+    return [k for k in everything
+            if not k.signatures() and not k.ahead() and id(k) not in called]
 
 
 def compiled_count() -> int:
@@ -221,3 +261,189 @@ def _rebound(function: Callable, form: Callable[[Kernel], Callable], mode) -> Ca
     copy.__kwdefaults__ = function.__kwdefaults__
     copy.__module__ = function.__module__
     return copy
+
+
+AHEAD_MODULE = 'wafer_planner_ros_kernels'
+"""The name of the extension module built ahead of time (its ``PyInit_`` function's)."""
+AHEAD_MANIFEST = 'manifest.json'
+"""The file beside it that says which function is which kernel for which argument types."""
+
+SCALARS = {float: 'float64', np.float64: 'float64', int: 'int64', np.int64: 'int64',
+           bool: 'bool', np.bool_: 'bool', complex: 'complex128', np.complex128: 'complex128'}
+"""An argument's Python type -> the numba type a kernel is built for."""
+
+
+def argument_types(args: tuple) -> Optional[tuple]:
+    """
+    Return the types of ``args`` as the build names them, None when one has no such type.
+
+    An array is ``(dtype, ndim, layout, readonly, aligned)`` as numba types it (layout 'C',
+    'F' or 'A' from numpy's flags): the built code trusts that its arguments are exactly
+    of the types it was built for, so a call matches only on all of these.
+    """
+    found = []
+    for value in args:
+        kind = SCALARS.get(type(value))
+        if kind is None:
+            if type(value) is not np.ndarray:
+                return None
+            flags = value.flags
+            layout = 'C' if flags.c_contiguous else 'F' if flags.f_contiguous else 'A'
+            kind = (value.dtype.str, value.ndim, layout, not flags.writeable, flags.aligned)
+        found.append(kind)
+    return tuple(found)
+
+
+def ahead_root() -> Path:
+    """Return where the builds ahead of time are kept: beside numba's cache."""
+    return cache_root() / 'ahead-of-time'
+
+
+class NoBuildAhead(Exception):
+    """There is no build ahead of time for this machine and these kernels (it says why)."""
+
+
+def ahead_identity() -> dict:
+    """
+    Return what a build ahead of time is valid for, and ``key``: a digest of all of it.
+
+    The Python, numpy and numba (its build's version file) that run it and the processor
+    (model and instruction-set flags: the code is built for this one). The kernels' own
+    code is checked on load (``kernels_digest``).
+    """
+    facts = {'python': sys.version, 'machine': platform.machine(), 'numpy': np.__version__,
+             'numba': _file_digest(_numba_version_file()), 'cpu': _processor()}
+    facts['key'] = hashlib.sha256(json.dumps(facts, sort_keys=True).encode()).hexdigest()[:20]
+    return facts
+
+
+def ahead_directory(identity: Optional[dict] = None) -> Path:
+    """Return where the build for this machine is (built or not)."""
+    return ahead_root() / (identity or ahead_identity())['key']
+
+
+def kernels_digest(modules) -> str:
+    """
+    Return a digest of the kernels of ``modules`` (imported): what a build of them compiled.
+
+    Each kernel's name and options, the source file of its module and the values of the
+    constants it uses (a kernel's compiled code holds the values they had): any change to a
+    kernel, or to a kernel it calls, changes it.
+    """
+    wanted = set(modules)
+    digest, sources = hashlib.sha256(), {}
+    for k in sorted(registered(), key=lambda k: (k.__module__, k.__qualname__)):
+        if k.__module__ not in wanted:
+            continue
+        path = k.function.__code__.co_filename
+        if path not in sources:
+            sources[path] = _file_digest(Path(path))
+        digest.update(f'{k.__module__}:{k.__qualname__}:{sources[path]}:'
+                      f'{sorted(k.options.items())}'.encode())
+        for name in sorted(global_names(k.function.__code__)):
+            value = k.function.__globals__.get(name)
+            if isinstance(value, np.ndarray):
+                digest.update(f'{name}={value.dtype.str}{value.shape}'.encode() + value.tobytes())
+            elif isinstance(value, (bool, int, float, complex, str, tuple)):
+                digest.update(f'{name}={value!r}'.encode())
+    return digest.hexdigest()[:20]
+
+
+def ahead_manifest() -> dict:
+    """
+    Return the manifest of this machine's build, its kernels checked; raise if there is none.
+
+    The kernel modules it lists are imported first. Raises :class:`NoBuildAhead` when
+    nothing was built for this machine (its Python, numpy, numba and processor) or the
+    kernels changed since, ``OSError`` when the manifest cannot be read.
+    """
+    directory = ahead_directory()
+    path = directory / AHEAD_MANIFEST
+    try:
+        manifest = json.loads(path.read_text())
+        modules = manifest['modules']
+    except FileNotFoundError:
+        raise NoBuildAhead(f'none built for this machine in {ahead_root()}') from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise OSError(f'{path} is not a build manifest: {exc!r}') from exc
+    try:
+        for name in modules:
+            importlib.import_module(name)
+    except ImportError as exc:
+        raise NoBuildAhead(f'the build in {directory} is of kernels this package no longer '
+                           f'has ({exc})') from exc
+    if kernels_digest(modules) != manifest.get('digest'):
+        raise NoBuildAhead(f'the kernels changed since the build in {directory}')
+    return manifest
+
+
+def load_ahead() -> int:
+    """
+    Load this machine's build of the kernels; return how many signatures it has.
+
+    Numba is not imported. Raises :class:`NoBuildAhead` when there is no build for this
+    machine and these kernels, ``OSError`` or ``ImportError`` when a build is there but
+    cannot be read or loaded: the kernels are then numba's.
+    """
+    manifest = ahead_manifest()
+    directory = ahead_directory()
+    spec = importlib.util.spec_from_file_location(AHEAD_MODULE, directory / manifest['file'])
+    if spec is None:
+        raise ImportError(f'{directory / manifest["file"]} cannot be loaded')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    by_name = {f'{k.__module__}:{k.__qualname__}': k for k in registered()}
+    tables = {}
+    for name, built in manifest['kernels'].items():
+        if name not in by_name:
+            raise ImportError(f'{directory} builds {name}, which is not a kernel')
+        tables[name] = {_hashable(types_): getattr(module, symbol) for types_, symbol in built}
+    for name, table in tables.items():
+        by_name[name]._ahead = table
+    return sum(len(table) for table in tables.values())
+
+
+def ahead_count() -> int:
+    """Return how many kernel signatures this process runs as built ahead of time."""
+    return sum(k.ahead() for k in registered())
+
+
+def _hashable(value):
+    """Return JSON's lists as tuples, all the way down."""
+    return tuple(_hashable(v) for v in value) if isinstance(value, list) else value
+
+
+def _numba_version_file() -> Optional[Path]:
+    """Return numba's version file (its release and build), found without importing it."""
+    spec = importlib.util.find_spec('numba')
+    return None if spec is None or not spec.origin else Path(spec.origin).parent / '_version.py'
+
+
+def _file_digest(path: Optional[Path]) -> str:
+    """Return a digest of the file's bytes ('' when there is none)."""
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()[:20] if path else ''
+    except OSError:
+        return ''
+
+
+def _processor() -> str:
+    """Return the processor's model and flags (Linux), else what ``platform`` says."""
+    try:
+        with open('/proc/cpuinfo') as info:
+            first = info.read().split('\n\n', 1)[0]
+    except OSError:
+        return platform.processor()
+    wanted = [line.split(':', 1)[1].strip() for line in first.splitlines()
+              if line.split(':', 1)[0].strip() in ('vendor_id', 'model name', 'flags',
+                                                   'Features', 'CPU part')]
+    return hashlib.sha256('\n'.join(wanted).encode()).hexdigest()[:20]
+
+
+def global_names(code: types.CodeType) -> set:
+    """Return the global names a function's code uses, its nested functions' included."""
+    found = set(code.co_names)
+    for constant in code.co_consts:
+        if isinstance(constant, types.CodeType):
+            found |= global_names(constant)
+    return found

@@ -1,10 +1,10 @@
 """
 ``wafer_planner_node``: the node's process, the compiled kernels loading from its first moment.
 
-Loading the kernels from numba's cache (about 0.7 s) takes longer than the rest of the
-start-up (imports, ROS, the roadmap from its cache); they are started here, before the
-node's own imports, in a thread of their own (``startup.load_kernels``), and the node is
-ready when both are done.
+The kernels load in a thread of their own (``startup.load_kernels``), started here before
+the node's own imports: the build made ahead of time takes a few milliseconds, numba's
+cache (when there is no build for this machine) about 0.7 s, longer than the rest of the
+start-up (imports, ROS, the roadmap from its cache). The node is ready when both are done.
 """
 
 from wafer_planner_ros.node import startup

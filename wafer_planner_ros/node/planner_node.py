@@ -449,7 +449,7 @@ def main(args=None) -> int:
     # The worker plans in Python: let the executor's threads in for the GIL every 1 ms
     # (default 5 ms) so that status queries and answers are not held up by planning.
     sys.setswitchinterval(0.001)
-    load_kernels()  # from numba's cache, beside ROS's start and the roadmap's load
+    load_kernels()  # beside ROS's start and the roadmap's load
     rclpy.init(args=args)
     node, executor, code = None, None, 0
     try:

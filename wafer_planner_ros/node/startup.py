@@ -2,14 +2,16 @@
 The node's process at start-up: the compiled kernels loaded early, and saying what loads.
 
 The node is ready only once it can answer: its roadmap loaded and the compiled kernels too
-(``worker``). ``load_kernels`` starts loading the kernels from numba's cache
-(``kernels.load_cached``) in a thread of their own as the process starts, beside the
-imports, the node's set-up and the roadmap's load; ``kernels_ready`` waits for that and,
-only if some kernel is not in the cache (an upgrade of the package, another machine),
-compiles them (``service.warmup``), announced by ``kernels_announced`` with progress.
-``since_process_start`` measures readiness from the process's start, and
-``core_warnings_to`` sends the core's warnings (Python ``logging``: the recorder's, the
-caches', the optimisers') to the node's log, where the rest of what it says goes.
+(``worker``). ``load_kernels`` starts loading the kernels in a thread of their own as the
+process starts, beside the imports, the node's set-up and the roadmap's load: the build
+``wafer-kernels`` made ahead of time for this machine (``kernels.load_ahead``, a few
+milliseconds, numba not imported), else numba's cache (``kernels.load_cached``, about a
+second). ``kernels_ready`` waits for that and, only if some kernel is in neither (an
+upgrade of the package, another machine), compiles them (``service.warmup``), announced
+by ``kernels_announced`` with progress. ``since_process_start`` measures readiness from
+the process's start, and ``core_warnings_to`` sends the core's warnings (Python
+``logging``: the recorder's, the caches', the optimisers') to the node's log, where the
+rest of what it says goes.
 """
 
 import contextlib
@@ -70,16 +72,22 @@ def kernels_announced(logger):
 
 
 class _KernelLoading:
-    """The kernels' load from numba's cache, once per process, in a thread of its own."""
+    """The kernels' load, once per process, in a thread of its own (the module's description)."""
 
     def __init__(self):
         self._lock = threading.Lock()
         self._thread: Optional[threading.Thread] = None
         self._compiled = threading.Event()
         """Set once every kernel is loaded or compiled."""
+        self.ahead = 0
+        """Signatures loaded from the build made ahead of time."""
         self.loaded = 0
-        """Signatures loaded from the cache."""
+        """Signatures loaded from numba's cache."""
+        self.seconds = 0.0
         self.error: Optional[BaseException] = None
+        self.ahead_error: Optional[BaseException] = None
+        self.no_build = ''
+        """Why there is no build ahead of time to load (``kernels.NoBuildAhead``)."""
 
     def start(self) -> None:
         with self._lock:
@@ -89,11 +97,24 @@ class _KernelLoading:
                 self._thread.start()
 
     def _load(self) -> None:
+        begun = time.monotonic()
         try:
             from wafer_planner_ros.service import warmup  # noqa: F401 - every kernel's module
-            self.loaded = kernels.load_cached()
         except Exception as exc:  # noqa: B902 - then they compile when used
             self.error = exc
+            return
+        try:
+            self.ahead = kernels.load_ahead()
+        except kernels.NoBuildAhead as exc:
+            self.no_build = str(exc)
+        except Exception as exc:  # noqa: B902 - a build that does not load: numba's cache
+            self.ahead_error = exc
+        if not self.ahead:
+            try:
+                self.loaded = kernels.load_cached()
+            except Exception as exc:  # noqa: B902 - then they compile when used
+                self.error = exc
+        self.seconds = time.monotonic() - begun
 
     def ready(self, logger, compiling: Callable[[], None]) -> None:
         self.start()
@@ -103,15 +124,30 @@ class _KernelLoading:
         with self._lock:  # one compile at a time (a rebuild cannot start meanwhile anyway)
             if self._compiled.is_set():
                 return
+            if self.ahead_error is not None:
+                logger.warning(f'the planning kernels built ahead of time in '
+                               f'{kernels.ahead_root()} could not be loaded: '
+                               f"{self.ahead_error}; using numba's cache")
+            if self.ahead:
+                logger.info(f'planning kernels loaded in {self.seconds:.3f} s: {self.ahead} '
+                            'signatures built ahead of time for this machine')
+                self._compiled.set()
+                return
             if self.error is not None:
                 logger.warning(f'the planning kernels could not be loaded from '
                                f'{kernels.cache_root()}: {self.error}')
+            if self.no_build:
+                logger.info(f'planning kernels built ahead of time: {self.no_build} '
+                            "(`wafer-kernels` builds them); loading them from numba's cache")
             missing = kernels.uncached()
             if missing:
                 compiling()
                 from wafer_planner_ros.service.warmup import compile_kernels
                 with kernels_announced(logger):
                     compile_kernels()
+            else:
+                logger.info(f'planning kernels loaded in {self.seconds:.2f} s: {self.loaded} '
+                            "signatures from numba's cache")
             self._compiled.set()
 
 
@@ -119,13 +155,13 @@ _KERNELS = _KernelLoading()
 
 
 def load_kernels() -> None:
-    """Start loading the compiled kernels from numba's cache (once; returns at once)."""
+    """Start loading the compiled kernels (once; returns at once)."""
     _KERNELS.start()
 
 
 def kernels_ready(logger, compiling: Callable[[], None] = lambda: None) -> None:
     """
-    Return once every kernel is loaded: from the cache, or compiled now if some are missing.
+    Return once every kernel is loaded: built ahead, cached, or compiled now if missing.
 
     ``compiling()`` is called first when they must be compiled (tens of seconds), which
     ``kernels_announced`` then logs with progress.

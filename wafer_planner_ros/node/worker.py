@@ -8,8 +8,9 @@ queue of its own, as long). Every
 queued request is answered by ``planning.timeout`` seconds after its receipt: the watchdog
 thread answers ``TIMEOUT`` at that instant for one not answered yet (waiting or still being
 planned), and a plan finished later is dropped, never sent. The loading thread loads the
-roadmap, waits for the compiled kernels (``startup.kernels_ready``: loaded from numba's
-cache since the process started, or compiled when missing) and loads the cached station
+roadmap, waits for the compiled kernels (``startup.kernels_ready``: loaded since the
+process started, built ahead of time or from numba's cache, or compiled when missing) and
+loads the cached station
 table, and only then does the roadmap serve: the node is ready when it can answer, and
 until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. When no
 table was cached it is planned next, and so are the pairs whose cached entries failed
@@ -232,6 +233,7 @@ class PlanningWorker:
                 'last_rebuild_error': self.last_load_error,
                 **table_counts(self._table, serving),
                 'kernels_compiled': kernels.compiled_count(),
+                'kernels_ahead': kernels.ahead_count(),
             }
 
     def request_stop(self) -> None:
