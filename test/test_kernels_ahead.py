@@ -40,6 +40,11 @@ for method in ('knot-timing', 'whole-curve'):
         found['plans'][f'{method} {start}'] = [result.trajectory.knots.tolist(),
                                                result.trajectory.control_points.tolist()]
 found['numba_after_planning'] = 'numba' in sys.modules
+# A small check runs the built kernel, not the kernel as Python (slower tenfold on a
+# roadmap's build); one not built runs as Python while numba is not loaded.
+from wafer_planner_ros.geometry import clearance, polygons
+found['small_checks_compiled'] = [
+    kernels.sized(1, 10)(k) is k for k in (clearance._spine_distances, polygons._inside)]
 # A kernel made with nogil=True lets other threads run while it computes: this thread
 # wakes from a short sleep while the kernel is still running (a held lock would keep it
 # asleep until the call ends, hundreds of times longer).
@@ -75,6 +80,8 @@ def test_the_build_loads_without_numba_plans_as_numba_does_and_releases_the_gil(
     assert not ahead['numba_after_planning']
     assert cached['numba_after_planning']
     assert ahead['plans'] == cached['plans']  # the same curves, to the last bit
+    assert ahead['small_checks_compiled'] == [True, False]
+    assert cached['small_checks_compiled'] == [True, True]
     assert ahead['woke_while_running'] and cached['woke_while_running']
 
 

@@ -180,11 +180,12 @@ def sized(work: int, limit: int) -> Callable[[Kernel], Callable]:
     """
     Return how to run kernels on a problem of size ``work``: ``form(kernel)(*args)``.
 
-    Interpreted when ``work`` is at most ``limit`` and numba is not loaded yet (a small
-    check at start-up, cheaper than loading numba), compiled otherwise.
+    Interpreted when ``work`` is at most ``limit`` and the kernel has no compiled form
+    loaded yet (neither built ahead of time nor numba loaded: a small check at start-up,
+    cheaper than loading numba), compiled otherwise.
     """
-    if work <= limit and not loaded():
-        return lambda k: k.interpreted
+    if work <= limit:
+        return lambda k: k if k.ahead() or loaded() else k.interpreted
     return lambda k: k
 
 
