@@ -135,6 +135,7 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
     say(f'building {signatures} signatures of {len(table)} kernels ahead of time for this '
         'processor (about 30 s)')
     directory.parent.mkdir(parents=True, exist_ok=True)
+    _remove_abandoned(directory.parent)
     staging = Path(tempfile.mkdtemp(prefix='.building-', dir=directory.parent))
     try:
         compiler.output_dir = str(staging)
@@ -169,3 +170,17 @@ def _install(staging: Path, directory: Path) -> None:
     finally:
         if previous is not None:
             shutil.rmtree(previous, ignore_errors=True)
+
+
+ABANDONED_AFTER = 3600.0
+"""s after which a build's temporary directory is taken as abandoned (its build killed)."""
+
+
+def _remove_abandoned(root: Path) -> None:
+    """Remove the temporary directories of builds killed before they ended."""
+    for left in [*root.glob('.building-*'), *root.glob('.previous-*')]:
+        try:
+            if time.time() - left.stat().st_mtime > ABANDONED_AFTER:
+                shutil.rmtree(left, ignore_errors=True)
+        except OSError:
+            continue  # removed meanwhile

@@ -43,7 +43,8 @@ from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.node.serving import build_station_table, load_station_table
 from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving
 from wafer_planner_ros.node.serving import table_counts, table_to_plan
-from wafer_planner_ros.node.startup import kernels_ready, since_process_start
+from wafer_planner_ros.node.startup import (import_for_planning, kernels_ready,
+                                            since_process_start)
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
@@ -494,6 +495,10 @@ class PlanningWorker:
             f'table {"of " + str(len(table)) + " pairs" if table is not None else "to plan"}'
             f' (ready {time.monotonic() - started:.2f} s after loading began'
             f'{since_process_start()})')
+        try:
+            import_for_planning()
+        except ImportError as exc:  # the first plan says it too
+            self._logger.error(f'the planner cannot import: {reason_of(exc)}')
         try:
             roadmap_markers = markers.roadmap_markers(cell, roadmap, settings.frame_id,
                                                       self._stamp())
