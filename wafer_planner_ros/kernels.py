@@ -142,6 +142,8 @@ class Kernel:
         Entries made for another machine or another version of the function's code are left
         alone (numba would not use them either).
         """
+        if not self.options.get('cache'):
+            return 0  # made with cache=False: numba keeps nothing of it
         dispatcher = self.compiled
         cache = dispatcher._cache  # numba 0.68's cache: its index lists the signatures
         index = cache._cache_file._load_index()

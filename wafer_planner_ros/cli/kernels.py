@@ -71,9 +71,11 @@ def main(argv=None) -> int:
         print(f"planning kernels: {exc}; the node loads them from numba's cache instead "
               '(about a second more at every start)', file=sys.stderr)
         return EXIT_OK
+    done = (f'built ahead of time into {made["directory"]} in {made["seconds"]:.1f} s'
+            if made['built'] else f'built ahead of time already in {made["directory"]}')
     print(f'planning kernels: {made["signatures"]} signatures of {made["kernels"]} kernels '
-          f'built ahead of time into {made["directory"]} in {made["seconds"]:.1f} s; left to '
-          f'numba (they reach Python code): {", ".join(made["left"]) or "none"}')
+          f'{done}; left to numba (they reach Python code): '
+          f'{", ".join(made["left"]) or "none"}')
     return EXIT_OK
 
 
