@@ -3,8 +3,9 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
 
 0. The station table at a cold start (an empty cache directory): how long after the
    roadmap serves it is planned, before anything is measured; then, in process, how long
-   loading it from the cache takes. The compiled kernels come from numba's cache, where
-   the set-up put them (``wafer-kernels``, which ``make bench`` runs first).
+   loading it from the cache takes. The node's compiled kernels are the set-up's build
+   ahead of time, the in-process ones numba's cache (``wafer-kernels``, which
+   ``make bench`` runs first, makes both).
 1. End-to-end latency, one request at a time (every directed station pair three times,
    answered from the table, and 200 random free joint requests, optimised within
    ``planning.optimise_budget``): request publish to result receipt, against the planning
