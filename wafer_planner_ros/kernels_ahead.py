@@ -114,7 +114,10 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
                 'signatures': sum(len(v) for v in manifest['kernels'].values())}
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')  # numba's notice that pycc will change
-        from numba.pycc import CC
+        try:
+            from numba.pycc import CC
+        except ImportError as exc:  # a numba without its ahead-of-time compiler
+            raise RuntimeError(f'the ahead-of-time build failed: {exc}') from exc
     compiler = CC(kernels.AHEAD_MODULE, source_module=kernels)
     compiler.target_cpu = 'host'
     compiler.verbose = False
