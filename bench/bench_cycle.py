@@ -9,7 +9,10 @@ peer (``peer.Peer``: OMPL PRM with 1500 milestones, simplification, an interpola
 cubic, TOPP-RA) and the per-axis wafer bound
 2 max(sqrt(|dx| / a_x), sqrt(|dy| / a_y)) of the wafer centre's displacement (bang-bang on
 each axis, everything else ignored: no motion is faster). Cycle time, planning ms and
-peak joint jerk for each; ratios to the peer. Writes ``results/cycle.json``.
+peak joint jerk for each; ratios to the peer; and where the whole-curve optimisation's
+planning time went, per cell and seed: each stage's share of it (``Planner.plan``'s
+``timings_ms``: the drafts are ``spline``) and the timed parts of ``optimise``
+(``stopwatch.PARTS``: subproblems, rows, limits, proofs). Writes ``results/cycle.json``.
 
 Run: ``python bench/bench_cycle.py [--seeds 1 2 3] [--cells default pillar notched]``.
 """
@@ -29,9 +32,10 @@ from peer import Peer
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import PlanningError
-from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.planner import Planner, PlannerSettings, STAGES
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service.settings import settings_from
+from wafer_planner_ros.trajectory.stopwatch import PARTS
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'cycle.json'
@@ -76,7 +80,8 @@ def ours(planner: Planner, start: str, goal: str, reference: bool = False,
             'peak_jerk': list(result.verification.peak_jerk),
             'jerk_ratio': result.verification.ratios.get('jerk'),
             'certified': result.verification.proof.certified,
-            'min_clearance': result.min_clearance, 'warnings': list(result.warnings)}
+            'min_clearance': result.min_clearance, 'warnings': list(result.warnings),
+            'stage_ms': {stage: result.timings_ms[stage] for stage in STAGES + PARTS}}
 
 
 def run(name: str, seed: int) -> dict:
@@ -114,6 +119,7 @@ def _summary(rows: list) -> dict:
         if key == 'ours':
             toppra = [r[key]['toppra_ratio'] for r in rows if r[key].get('toppra_ratio')]
             out[key]['median_vs_toppra'] = float(np.median(toppra)) if toppra else None
+            out[key]['time_share'] = _time_share([r[key] for r in rows])
         if key != 'peer':
             ratios = [x for x in (_ratio(r, key) for r in rows) if x is not None]
             out[key].update(median_vs_peer=float(np.median(ratios)) if ratios else None,
@@ -121,6 +127,14 @@ def _summary(rows: list) -> dict:
                             at_most_peer=sum(x <= 1.0 for x in ratios), pairs=len(rows))
     out['bound'] = {'median_s': float(np.median([r['bound'] for r in rows]))}
     return out
+
+
+def _time_share(planned: list) -> dict:
+    """Return where the planning time of these plans went: each stage's share of it all."""
+    planned = [p for p in planned if p.get('stage_ms')]
+    total = sum(p['planning_ms'] for p in planned)
+    return {stage: sum(p['stage_ms'][stage] for p in planned) / total if total else None
+            for stage in STAGES + PARTS}
 
 
 def _print_row(row: dict) -> None:
@@ -159,6 +173,10 @@ def main() -> int:
                 + f"; ours/peer median {s['ours']['median_vs_peer']:.3f}, worst "
                 f"{s['ours']['worst_vs_peer']:.3f}, at most the peer on "
                 f"{s['ours']['at_most_peer']}/{s['ours']['pairs']} pairs")
+            share = s['ours']['time_share']
+            print('where the planning time of ours went (all pairs): ' + ', '.join(
+                f'{stage} {100.0 * share[stage]:.1f} %' for stage in STAGES + PARTS
+                if share[stage] is not None), flush=True)
     RESULTS.parent.mkdir(exist_ok=True)
     RESULTS.write_text(json.dumps({
         'benchmark': 'cycle times per station pair: ours, the paper, the peer, the bound',

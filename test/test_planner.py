@@ -14,6 +14,7 @@ from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS, Shaped
+from wafer_planner_ros.trajectory.stopwatch import collecting, PARTS, timed
 from wafer_planner_ros.trajectory.tuning import TimingSettings
 from wafer_planner_ros.trajectory.verify import verify
 
@@ -77,7 +78,7 @@ def test_result_carries_samples_metrics_and_stage_timings(default_cell, default_
     assert np.allclose(np.diff(result.times[:-1]), 0.02)
     assert result.times[-1] == result.cycle_time
     assert np.array_equal(result.positions[-1], result.goal_q)
-    assert set(STAGES) | {'total'} == set(result.timings_ms)
+    assert set(STAGES) | set(PARTS) | {'total'} == set(result.timings_ms)
     for key in ('joint_path_length', 'wafer_path_length', 'solver_iterations', 'method',
                 'candidates', 'control_points'):
         assert key in result.metrics
@@ -292,3 +293,27 @@ def test_a_combination_slower_by_its_joint_limits_alone_is_not_optimised(
     assert hopeless == 2 and len(finished) == 2 and result.metrics['given_up'] == 2
     own = default_cell.robot.limits.shortest_motion(result.goal_q - result.start_q).max()
     assert own <= result.cycle_time
+
+
+def test_the_whole_curve_optimisations_parts_are_timed_within_it(
+        default_cell, default_roadmap):
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    timings = planner.plan('loadport1', 'loadlock1').timings_ms
+    parts = [timings[part] for part in PARTS]
+    assert all(ms > 0.0 for ms in parts), timings  # subproblems, rows, limits, proofs
+    assert sum(parts) <= timings['optimise'] <= timings['total']
+
+
+def test_a_timed_block_adds_only_to_the_totals_collecting_around_it():
+    outer, inner = {}, {}
+    with timed('optimise.qp'):  # nobody collects: nothing to add to
+        pass
+    with collecting(outer):
+        with timed('optimise.qp'):
+            with collecting(inner):
+                with timed('optimise.rows'):
+                    pass
+        with timed('optimise.rows'):
+            pass
+    assert set(outer) == {'optimise.qp', 'optimise.rows'} and set(inner) == {'optimise.rows'}
+    assert outer['optimise.qp'] >= inner['optimise.rows'] >= 0.0

@@ -26,12 +26,14 @@ from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import Draft, METHODS, Shaped
+from wafer_planner_ros.trajectory.stopwatch import collecting, PARTS
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
 
 STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify')
+"""The stages of a plan, timed in its ``timings_ms`` (with ``PARTS`` of them and ``total``)."""
 
 KNOWN_LISTED = 10
 """The stations an UNKNOWN_STATION message lists (then how many more there are)."""
@@ -116,6 +118,8 @@ class PlanResult:
     metrics: Mapping = field(default_factory=dict)
     """What is measured nowhere else: path sizes and lengths, the method's figures."""
     timings_ms: Mapping = field(default_factory=dict)
+    """ms by stage (``STAGES``), by timed part of a stage (``stopwatch.PARTS``) and in all
+    (``total``)."""
     warnings: Tuple[str, ...] = ()
 
     @property
@@ -201,7 +205,7 @@ class Planner:
         if branches is not None:
             a, b = (_only_branch(end, elbow, role) for end, elbow, role in
                     ((a, branches[0], 'start'), (b, branches[1], 'goal')))
-        stage_ms = dict.fromkeys(STAGES, 0.0)
+        stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
         prepared, failure = [], None
         for elbow_a, qa in a.configs:
             for elbow_b, qb in b.configs:
@@ -287,7 +291,8 @@ class Planner:
                   until=None) -> Optional['_Candidate']:
         """Return the finished curve, not yet verified; None if it cannot win."""
         clock = _Clock(stage_ms)
-        shaped = self.method.finish(pair.draft, give_up_above, until)
+        with collecting(stage_ms):  # the optimisation's parts (``stopwatch.PARTS``)
+            shaped = self.method.finish(pair.draft, give_up_above, until)
         clock.lap('optimise')
         return None if shaped is None else _Candidate(pair, shaped)
 

@@ -38,6 +38,7 @@ from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape_problem import ShapeProblem
+from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import peaks_over, single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
@@ -106,11 +107,14 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             logger.debug('shape round %d: T = %.4f s cannot beat %.4f s', rounds,
                          intervals.sum(), give_up_above)
             return None
-        timed = TimingProblem(points, cell.robot, timing)
-        ratio, dense_span, dense_fraction = timed.dense_wafer_ratio(intervals)
-        rescale = timed.scale_factor(intervals, ratio.max())
-        curve = CubicBSpline.from_intervals(points, timed.meet_limits(rescale * intervals)[0])
-        proof = prove(curve, problem.model, cell.robot.lipschitz)
+        with timed('optimise.limits'):
+            limits = TimingProblem(points, cell.robot, timing)
+            ratio, dense_span, dense_fraction = limits.dense_wafer_ratio(intervals)
+            rescale = limits.scale_factor(intervals, ratio.max())
+            curve = CubicBSpline.from_intervals(
+                points, limits.meet_limits(rescale * intervals)[0])
+        with timed('optimise.proof'):
+            proof = prove(curve, problem.model, cell.robot.lipschitz)
         logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '
                      'proven %s, min span %.4f s', rounds, result.message, result.nit,
                      curve.duration, rescale, ratio.max(), proof.certified, intervals.min())
@@ -206,8 +210,9 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     nearby = x0 + np.random.default_rng(0).uniform(-1e-3, 1e-3, len(x0))
     norms = []
     for x in (x0, nearby):
-        values, jacobian = problem.solver_rows(*problem.unpack(x, scale), wafer, clearance,
-                                               scale)
+        with timed('optimise.rows'):
+            values, jacobian = problem.solver_rows(*problem.unpack(x, scale), wafer,
+                                                   clearance, scale)
         norms.append(np.linalg.norm(jacobian, axis=1))
         if x is x0:
             first = (values, jacobian)
@@ -216,9 +221,10 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     weights = 1.0 / norms[keep]
 
     def linearised(x):
-        values, jacobian = problem.solver_rows(*problem.unpack(x, scale), wafer, clearance,
-                                               scale)
-        return values[keep] * weights, jacobian[keep] * weights[:, None]
+        with timed('optimise.rows'):
+            values, jacobian = problem.solver_rows(*problem.unpack(x, scale), wafer,
+                                                   clearance, scale)
+            return values[keep] * weights, jacobian[keep] * weights[:, None]
 
     lower, upper = _inner_limits(problem.robot)
     moving = int(free.sum())

@@ -24,6 +24,8 @@ from typing import Callable, Optional
 import daqp
 import numpy as np
 
+from wafer_planner_ros.trajectory.stopwatch import timed
+
 INF = 1e30
 """daqp's infinity."""
 RELAX_PENALTY = 100.0
@@ -73,12 +75,14 @@ def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub:
             message = 'stopped: the time budget ran out'
             break
         lo, hi = lb - x, ub - x
-        s, _, flag, info = daqp.solve(B, c, J, np.concatenate([hi, upper_rows]),
-                                      np.concatenate([lo, -g]), sense,
-                                      iter_limit=QP_ITERATIONS)
+        with timed('optimise.qp'):
+            s, _, flag, info = daqp.solve(B, c, J, np.concatenate([hi, upper_rows]),
+                                          np.concatenate([lo, -g]), sense,
+                                          iter_limit=QP_ITERATIONS)
         relaxed = flag < 1
         if relaxed:
-            s, mult, flag = _relaxed(B, c, J, g, lo, hi)
+            with timed('optimise.qp'):
+                s, mult, flag = _relaxed(B, c, J, g, lo, hi)
             if flag < 1:
                 if not reset:  # start B again from the identity once
                     B, reset, sense = np.eye(n), True, np.zeros(n + m, dtype=np.int32)
