@@ -360,7 +360,11 @@ def ahead_manifest() -> dict:
     nothing was built for this machine (its Python, numpy, numba and processor) or the
     kernels changed since, ``OSError`` when the manifest cannot be read.
     """
-    directory = ahead_directory()
+    return _checked_manifest(ahead_directory())
+
+
+def _checked_manifest(directory: Path) -> dict:
+    """Return the manifest in ``directory``, its kernels checked (``ahead_manifest``)."""
     path = directory / AHEAD_MANIFEST
     try:
         manifest = json.loads(path.read_text())
@@ -388,8 +392,8 @@ def load_ahead() -> int:
     machine and these kernels, ``OSError`` or ``ImportError`` when a build is there but
     cannot be read or loaded: the kernels are then numba's.
     """
-    manifest = ahead_manifest()
     directory = ahead_directory()
+    manifest = _checked_manifest(directory)
     spec = importlib.util.spec_from_file_location(AHEAD_MODULE, directory / manifest['file'])
     if spec is None:
         raise ImportError(f'{directory / manifest["file"]} cannot be loaded')
