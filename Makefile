@@ -1,4 +1,5 @@
-# The two commands of the README: `make run` and `make test` (plus `make bench`).
+# The two commands of the README: `make run` and `make test` (plus `make test-fast` and
+# `make bench`).
 # Each first sets up .venv/ (idempotently) from requirements.txt and this package.
 
 PYTHON ?= python3
@@ -13,7 +14,7 @@ COLCON := $(ENV) colcon --log-base .colcon/log
 COLCON_PATHS := --paths $(CURDIR) --build-base .colcon/build --install-base .colcon/install
 RUN_ARGS ?=
 
-.PHONY: setup kernels run test bench clean
+.PHONY: setup kernels run test test-fast bench clean
 
 setup: $(STAMP)
 
@@ -46,6 +47,11 @@ test: $(STAMP)
 	$(COLCON) test $(COLCON_PATHS) --return-code-on-test-failure \
 		--event-handlers console_direct+ --pytest-args -p no:cacheprovider
 	$(COLCON) test-result --test-result-base .colcon/build --verbose
+
+# The inner loop while developing: the tests not marked slow, run on the sources in place
+# (the editable install) with the kernels compiled for them; no colcon, no linters' copy.
+test-fast: kernels
+	$(ENV) $(PY) -m pytest test -m "not slow" -p no:cacheprovider -q
 
 bench: kernels
 	$(PY) -m pip install --disable-pip-version-check -q -r bench/requirements.txt

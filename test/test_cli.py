@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cli.common import run
@@ -37,6 +38,7 @@ def test_twice_with_the_same_seed_gives_the_same_hash_and_a_cache_hit(tmp_path, 
     assert set(first['samplers']) == {'uniform', 'gaussian', 'bridge'}
 
 
+@pytest.mark.slow
 def test_text_output_and_plot(tmp_path, capsys):
     png = tmp_path / 'roadmap.png'
     code, out, _ = _run(capsys, '--nodes', '300', '--no-cache', '--plot', str(png))
@@ -47,6 +49,7 @@ def test_text_output_and_plot(tmp_path, capsys):
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20_000
 
 
+@pytest.mark.slow
 def test_the_roadmap_figure_names_joints_stations_and_branches_as_the_cell_does(tmp_path):
     text = default_cell_path().read_text()
     assert text.count('joint_names: [shoulder, elbow, wrist]') == 1

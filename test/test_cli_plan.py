@@ -79,6 +79,7 @@ def test_the_plan_figure_marks_the_verified_closest_approach_and_names_branches(
                       if line.get_linestyle() == '--') == sorted(np.concatenate([-jerk, jerk]))
 
 
+@pytest.mark.slow
 def test_all_pairs_table_and_json_file(roadmap_cache, capsys, tmp_path):
     out_file = tmp_path / 'pairs.json'
     code, out, _ = _run(capsys, '--all-pairs', '--cache-dir', str(roadmap_cache), '--json',

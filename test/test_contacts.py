@@ -74,6 +74,7 @@ def test_a_wafer_in_the_pillar_names_the_obstacle():
     assert _colliding(cell, inside[0].q)['wafer'] == 'wafer inside cell.obstacles[0]'
 
 
+@pytest.mark.slow
 def test_the_colliding_bodies_are_those_shapely_finds(cell):
     """Per body and per outline, on random configurations, against shapely's buffers."""
     rng = np.random.default_rng(5)

@@ -70,6 +70,7 @@ def _plan(source: str) -> dict:
     return json.loads(out.stdout)
 
 
+@pytest.mark.slow
 def test_the_build_loads_without_numba_plans_as_numba_does_and_releases_the_gil():
     # The set-up (wafer-kernels) built them for this machine.
     assert (kernels.ahead_directory() / kernels.AHEAD_MANIFEST).exists(), \

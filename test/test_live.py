@@ -222,6 +222,7 @@ def test_a_late_client_gets_where_the_joint_space_frame_stands(harness):
         assert struct.pack('<d', value) in data
 
 
+@pytest.mark.slow
 def test_a_client_that_never_reads_does_not_hold_the_node_up(harness):
     async def run():
         stalled = await Client.connect(_url(harness))
@@ -379,6 +380,7 @@ def _resident_mb(pid: int) -> float:
     raise AssertionError(f'no VmRSS for process {pid}')
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='reads /proc')
 @pytest.mark.parametrize('clients', [1, 20])
 def test_clients_that_subscribe_and_unsubscribe_without_reading_neither_grow_nor_hold_the_node(

@@ -106,6 +106,7 @@ def _summary(m) -> tuple:
             bool(m.mesh_use_embedded_materials))
 
 
+@pytest.mark.slow
 def test_the_bytes_read_back_as_the_object_path_gives_with_rclpy_and_rosbags(scenes):
     for scene in scenes:
         data = marker_array(scene)

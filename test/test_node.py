@@ -106,6 +106,7 @@ def test_joint_request_in_any_joint_order(harness, default_cell):
     ('bytes', '', b'\x00\x01\x00\x00\xff\xff\xff\x7fgarbage', 'INVALID_REQUEST'),
     ('joint bytes', '', b'\x00\x01\x00\x00garbage', 'INVALID_REQUEST'),
 ])
+@pytest.mark.slow
 def test_every_bad_input_gets_one_error_and_the_node_serves_on(
         harness, kind, request_id, payload, code):
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -204,6 +205,7 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
     assert harness.result('after-rebuild').level == DiagnosticStatus.OK
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('bad', ['missing', 'invalid', 'unbuildable'])
 def test_a_failed_rebuild_keeps_serving_the_last_good_roadmap(harness, tmp_path, monkeypatch,
                                                               bad):

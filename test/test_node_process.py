@@ -41,6 +41,7 @@ def _client(env, *args):
                           text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_node_process_answers_the_client_and_stops_on_sigint(
         dds_env, roadmap_cache, tmp_path, default_roadmap):
     node = subprocess.Popen(
@@ -90,6 +91,7 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
             f'edges, hash {default_roadmap.digest[:12]}') in output
 
 
+@pytest.mark.slow
 def test_client_says_no_node_found_without_waiting_for_its_timeout(dds_env):
     # No node in this domain: discovery finds none within seconds, long before --timeout.
     dds_env['ROS_DOMAIN_ID'] = str(200 + os.getpid() % 30)

@@ -88,6 +88,7 @@ def _ask(env, start: str, goal: str, request_id: str) -> dict:
     return values
 
 
+@pytest.mark.slow
 def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends_it_at_once(
         dds_env, tmp_path):
     # A new roadmap.cache_dir: the roadmap is built and the station table planned after
@@ -202,6 +203,7 @@ def test_a_station_pair_of_the_table_is_answered_at_once_while_joint_requests_pl
     assert arrived['table'] - sent < 1.0
 
 
+@pytest.mark.slow
 def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
         table_node, default_cell, monkeypatch):
     from node_harness import values

@@ -363,18 +363,21 @@ def detour_polygons(draw):
     return draw(variant([tuple(p) for p in points]))
 
 
+@pytest.mark.slow
 @_settings(3000)
 @given(grid_polygons())
 def test_grid_polygons_agree_with_geos(points):
     compare('grid', points)
 
 
+@pytest.mark.slow
 @_settings(2500)
 @given(rectilinear_polygons())
 def test_rectilinear_polygons_agree_with_geos(points):
     compare('rectilinear', points)
 
 
+@pytest.mark.slow
 @_settings(1500)
 @given(star_polygons())
 def test_star_polygons_agree_with_geos(points):

@@ -88,6 +88,7 @@ def test_the_proof_is_sound_and_decides_clear_cases(default_cell):
     assert certified >= 10 and refuted >= 10  # both kinds were really tried
 
 
+@pytest.mark.slow
 def test_curves_grazing_a_wall_are_told_apart_at_a_fifth_of_a_millimetre(default_cell):
     """
     A curve that dips 0.2 mm into a wall for a moment is refuted; one 0.2 mm clear, proven.

@@ -95,6 +95,7 @@ def replay(bag, roadmap_cache):
                           capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_a_stopped_node_leaves_a_complete_recording(tmp_path, roadmap_cache, default_cell,
                                                     stop):
@@ -119,6 +120,7 @@ def test_a_stopped_node_leaves_a_complete_recording(tmp_path, roadmap_cache, def
         assert all(f'>{r.name}<' in index for r in peer.results if r.name)
 
 
+@pytest.mark.slow
 def test_a_killed_node_leaves_a_recording_that_recover_completes(tmp_path, roadmap_cache,
                                                                  default_cell):
     bag, peer, output, code = record_session(tmp_path, roadmap_cache, default_cell,
@@ -136,6 +138,7 @@ def test_a_killed_node_leaves_a_recording_that_recover_completes(tmp_path, roadm
     assert replayed.returncode == 0, replayed.stdout + replayed.stderr
 
 
+@pytest.mark.slow
 def test_a_killed_node_leaves_a_split_recording_that_recover_completes(tmp_path, roadmap_cache,
                                                                        default_cell):
     """

@@ -231,6 +231,7 @@ def test_thumbnails_beside_the_figures_link_to_them(bag, tmp_path, capsys):
         assert small.shape[0] == round(full.shape[0] * small.shape[1] / full.shape[1])
 
 
+@pytest.mark.slow
 def test_flags_mark_exactly_the_queries_beyond_the_thresholds(bag, tmp_path, capsys):
     _, found = recorded_queries(str(bag), 'testing')
     values = {query.number: query.result.values for query in found}

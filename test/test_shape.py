@@ -18,10 +18,13 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
-from wafer_planner_ros.trajectory import sqp
+from wafer_planner_ros.trajectory import methods, sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
-from wafer_planner_ros.trajectory.shape import _clearance_samples, optimise_shape
+from wafer_planner_ros.trajectory.coarse import coarse_start, fitted_points
+from wafer_planner_ros.trajectory.proof import prove
+from wafer_planner_ros.trajectory.shape import _clearance_samples, optimise_shape, Shaping
 from wafer_planner_ros.trajectory.shape_problem import CLEARANCE_SCALE, refine, ShapeProblem
+from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
 
@@ -168,3 +171,86 @@ def test_within_a_time_budget_each_solve_stops_sooner(default_cell, corridor):
     # 60 random joint requests.
     assert exact.trajectory.duration <= budgeted.trajectory.duration \
         < 1.02 * exact.trajectory.duration
+
+
+def test_the_coarse_curve_fits_the_polygon_at_rest_at_both_ends(default_cell):
+    """A polygon on a smooth curve is fitted closely; the ends are three equal points."""
+    u = np.linspace(0.0, 1.0, 40)
+    polygon = np.stack([np.sin(2.0 * u), u * u - 1.0, 0.5 * np.cos(3.0 * u)], axis=1)
+    points = fitted_points(polygon, 8)
+    assert points.shape == (11, 3)
+    assert np.all(points[:3] == polygon[0]) and np.all(points[-3:] == polygon[-1])
+    curve = coarse_start(polygon, 8, default_cell.robot, TimingSettings())
+    dense = curve.evaluate(np.linspace(0.0, curve.duration, 400))
+    # It follows the polygon: its vertices lie far nearer the curve than the straight line
+    # between its ends does.
+    gaps = np.linalg.norm(dense[:, None, :] - polygon[None], axis=2).min(axis=0)
+    chord = polygon[-1] - polygon[0]
+    along = (polygon - polygon[0]) @ chord / (chord @ chord)
+    straight = np.linalg.norm(polygon - polygon[0] - along[:, None] * chord, axis=1)
+    assert gaps.max() < 0.25 * straight.max()
+    # On a straight polygon the fit is the straight line itself.
+    line = polygon[0] + np.linspace(0.0, 1.0, 7)[:, None] * chord
+    fitted = fitted_points(line, 8)
+    offsets = fitted - polygon[0]
+    assert np.allclose(np.cross(offsets, chord), 0.0, atol=1e-12)
+    assert curve.ill_formed(polygon[0], polygon[-1]) is None
+    # λ-scaled: every limit met at the verification's times.
+    problem = TimingProblem(curve.control_points, default_cell.robot, TimingSettings())
+    assert problem.scale_factor(curve.intervals) <= 1.0 + 1e-9
+
+
+def test_an_unproven_start_is_never_returned(default_cell, corridor):
+    """A start through a wall: only proven curves come back, or none at all."""
+    points = corridor.trajectory.control_points.copy()
+    model = default_cell.clearance_model
+    # Three equal control points in the middle at a configuration that collides: the curve
+    # passes through it.
+    rng = np.random.default_rng(4)
+    lower, upper = default_cell.robot.limits.position.T
+    q = rng.uniform(lower, upper, (200, 3))
+    inside = q[model.clearance(q) <= 0.0][0]
+    middle = len(points) // 2
+    points[middle - 1:middle + 2] = inside
+    start = CubicBSpline.from_intervals(points, corridor.trajectory.intervals)
+    assert not prove(start, model, default_cell.robot.lipschitz).certified
+    late = optimise_shape(start, default_cell, deadline=time.monotonic() - 1.0, proven=False)
+    assert late.trajectory is None and not late.improved  # no time: nothing proven
+    shaped = optimise_shape(start, default_cell, proven=False)
+    assert shaped.trajectory is None or (
+        shaped.improved and prove(shaped.trajectory, model,
+                                  default_cell.robot.lipschitz).certified)
+
+
+def test_without_a_proven_coarse_curve_the_corridor_curve_starts_the_fine_stage(
+        default_cell, default_roadmap, monkeypatch):
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    starts = []
+    real = methods.optimise_shape
+
+    def coarse_fails(start, cell, shape, *rest, **options):
+        if not options.get('proven', True):
+            return Shaping(None, False, 0, 1, shape.min_spans, 'no curve was proven')
+        starts.append(start)
+        return real(start, cell, shape, *rest, **options)
+
+    monkeypatch.setattr(methods, 'optimise_shape', coarse_fails)
+    result = planner.plan('loadport2', 'loadlock2', branches=(1, 1))
+    corridor = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2',
+                                                           branches=(1, 1))
+    # The fine stage started from the corridor curve with optimised knot times.
+    assert np.array_equal(starts[0].control_points, corridor.trajectory.control_points)
+    assert result.verification.ok and result.verification.proof.certified
+    assert 'coarse_cycle_time' not in result.metrics
+    assert result.cycle_time < 0.8 * corridor.cycle_time
+
+
+def test_the_fine_stage_never_returns_a_slower_curve_than_the_coarse_one(
+        default_cell, default_roadmap, monkeypatch):
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    made = []
+    monkeypatch.setattr(methods.KnotTiming, 'finish', lambda *a, **k: made.append(a))
+    result = planner.plan('loadport1', 'loadlock2')
+    assert result.cycle_time <= result.metrics['coarse_cycle_time']
+    assert result.verification.ok and not result.warnings
+    assert made == []  # the corridor curve is made only when it is needed

@@ -362,8 +362,8 @@ class _Candidate:
 
     def fallback(self) -> Optional['_Candidate']:
         """Return the combination with the curve its method started from, if it has one."""
-        start = self.shaped.fallback
-        return None if start is None else _Candidate(self.pair, start)
+        make = self.shaped.fallback
+        return None if make is None else _Candidate(self.pair, make())
 
 
 class _Clock:

@@ -4,7 +4,7 @@ import numpy as np
 
 
 def plan_json(result, roadmap_info: dict, joint_names) -> dict:
-    """Return a successful plan as the tools' JSON object (README, "Command-line tools")."""
+    """Return a successful plan as the tools' JSON object (doc/operations.md, the tools)."""
     points = [{'t': float(t), 'q': q.tolist(), 'qd': qd.tolist(), 'qdd': qdd.tolist()}
               for t, q, qd, qdd in zip(result.times, result.positions, result.velocities,
                                        result.accelerations)]
@@ -37,7 +37,7 @@ def measured(result) -> dict:
 
 
 def error_json(code: str, message: str, start, goal, roadmap_info: dict) -> dict:
-    """Return a failed request as the tools' JSON object (README, "Command-line tools")."""
+    """Return a failed request as the tools' JSON object (doc/operations.md, the tools)."""
     return {'status': 'error', 'code': code, 'message': message, 'from': _label(start),
             'to': _label(goal), 'roadmap': roadmap_info}
 

@@ -37,7 +37,8 @@ roadmap markers), cannot refuse a client and, stopping, waits for its clients. H
   listening socket, waited for at most ``STOP_WAIT`` (the thread is a daemon).
 
 So what the view holds per client is at most its outbox, the message being sent (once more,
-in the socket's buffer) and ``INCOMING`` of what it sent (README, "Live view in Foxglove").
+in the socket's buffer) and ``INCOMING`` of what it sent (doc/operations.md, "Live view in
+Foxglove").
 ``foxglove-sdk`` and ``websockets`` are imported only when the view starts: without them,
 or when the port cannot be bound, the error is logged naming the port, shown in the status,
 and the node serves on.

@@ -1,4 +1,4 @@
-"""Messages the node publishes, built from the core's results (README, "The node")."""
+"""Messages the node publishes, built from the core's results (doc/operations.md, "The node")."""
 
 import enum
 import json
@@ -61,7 +61,7 @@ def result_status(request_id: str, level: str, message: str,
 
 
 def plan_values(result, roadmap, start, goal) -> dict:
-    """Return the values of a successful result (README, "The node")."""
+    """Return the values of a successful result (doc/operations.md, "The node")."""
     values = {'code': 'OK', 'cycle_time': result.cycle_time,
               'initial_cycle_time': result.initial_cycle_time,
               'planning_time_ms': result.timings_ms['total']}

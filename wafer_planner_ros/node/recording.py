@@ -1,5 +1,7 @@
 """
-What the node records, and when (README, "Recording"): the node's side of a ``Recorder``.
+What the node records, and when: the node's side of a ``Recorder``.
+
+See doc/operations.md, "Recording".
 
 A query is recorded as one group when its answer goes out: its request as received (raw
 bytes, log time = receipt, held until then), its trajectory and its result as published

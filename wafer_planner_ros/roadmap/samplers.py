@@ -7,7 +7,7 @@ yields nothing (a uniform sample in collision, a Gaussian pair that does not str
 obstacle boundary, a bridge whose ends are not both in collision or whose middle is not
 free) is a failed draw.
 
-Adaptive rule (documented in the README): every sampler i has a weight w_i, initially 1,
+Adaptive rule (documented in doc/how-it-works.md): every sampler i has a weight w_i, initially 1,
 and each draw picks sampler i with probability ``p_i = (1 - n * FLOOR) * w_i / sum(w) +
 FLOOR`` so that no sampler is ever starved. After every round each draw is scored:
 

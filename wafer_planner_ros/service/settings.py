@@ -36,7 +36,7 @@ MAX_BAG_DURATION = 10 * 365 * 86400.0
 
 PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('cell_file', '',
-              'cell YAML file (see the README, "The cell file"); empty: the packaged '
+              'cell YAML file (see doc/cell-format.md); empty: the packaged '
               'config/efem_default.yaml'),
     Parameter('roadmap.nodes', 1500, 'sampled roadmap nodes', 10, MAX_NODES),
     Parameter('roadmap.seed', 0, 'roadmap random seed', 0, MAX_SEED),

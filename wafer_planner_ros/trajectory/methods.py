@@ -11,9 +11,10 @@ verification is replaced by its ``fallback`` when it has one. A method returns a
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, replace
-from typing import ClassVar, Mapping, Optional, Tuple
+from typing import Callable, ClassVar, Mapping, Optional, Tuple
 
-from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
+from wafer_planner_ros.trajectory.coarse import coarse_start
 from wafer_planner_ros.trajectory.corridor import Corridor
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.shape import optimise_shape
@@ -42,9 +43,9 @@ class Shaped:
     metrics: Mapping = field(default_factory=dict)
     """The method's own figures (solver iterations and the like)."""
     warnings: Tuple[str, ...] = ()
-    fallback: Optional['Shaped'] = None
-    """What to return instead if this curve fails verification (the curve it started
-    from), if anything."""
+    fallback: Optional[Callable[[], 'Shaped']] = None
+    """Makes what to return instead if this curve fails verification (the corridor curve),
+    if anything: called only then."""
 
 
 class CurveMethod(ABC):
@@ -107,42 +108,64 @@ class KnotTiming(CurveMethod):
 
 class WholeCurve(KnotTiming):
     """
-    The control points move with the span durations (``shape.optimise_shape``).
+    The control points move with the span durations (``shape.optimise_shape``), coarse first.
 
-    The draft is the corridor curve with optimised knot times (``KnotTiming``: feasible by
-    construction, and near the answer, so SLSQP starts close; its cycle time orders the
-    elbow-branch combinations better than the λ-scaled start does); the curve returned is
-    proven collision-free on its own (``proof``), not by the corridor, and falls back on
-    the corridor curve if it fails verification.
+    The draft is the corridor's λ-scaled start (``KnotTiming``; its cycle time orders the
+    elbow-branch combinations). Finishing optimises a curve of
+    ``ShapeSettings.coarse_spans`` spans fitted to the corridor (``coarse``), then refines
+    its optimum to as many spans as the corridor has (``ShapeSettings.min_spans`` at least)
+    and optimises that. When the coarse stage proves no curve, the fine one starts from the
+    corridor curve with optimised knot times (``KnotTiming``: feasible by construction), as
+    it does for a curve that fails verification: the curve returned is proven collision-free
+    on its own (``proof``), not by the corridor.
     """
 
     name = 'whole-curve'
 
     def draft(self, corridor: Corridor) -> Draft:
-        """Return the corridor curve with optimised knot times."""
+        """Return the corridor's λ-scaled start, keeping the corridor for ``finish``."""
         start = super().draft(corridor)
-        timed = super().finish(start)
-        return Draft(timed.trajectory.duration, (start.estimate, timed))
+        return Draft(start.estimate, (start, corridor))
 
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
                until: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
-        initial, timed = draft.work
-        shaped = optimise_shape(timed.trajectory, self.cell, self.shape, self.settings,
-                                give_up_above, until)
+        start, corridor = draft.work
+        shape = self.shape
+        stage = replace(shape, min_spans=shape.coarse_spans)
+        coarse = optimise_shape(
+            coarse_start(corridor.control_points, shape.coarse_spans, self.cell.robot,
+                         self.settings),
+            self.cell, stage, self.settings,
+            None if give_up_above is None else shape.coarse_give_up * give_up_above, until,
+            proven=False, first_proven=True)
+        if coarse is None:
+            return None  # its optimum is far slower than the best so far
+        timed = None if coarse.trajectory is not None else super().finish(start)
+        begin = coarse.trajectory if timed is None else timed.trajectory
+        spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)
+        shaped = optimise_shape(begin, self.cell, replace(shape, min_spans=spans),
+                                self.settings, give_up_above, until)
         if shaped is None:
             return None
-        warnings = () if shaped.improved else (
+        warnings = () if shaped.improved or timed is None else (
             f'whole-curve optimisation found no faster proven curve ({shaped.message}); '
             'returning the corridor curve',)
-        metrics = dict(timed.metrics, optimised=shaped.improved,
-                       shape_iterations=shaped.iterations, shape_rounds=shaped.rounds,
-                       spans=shaped.spans, corridor_cycle_time=timed.trajectory.duration)
-        fallback = replace(timed, warnings=timed.warnings + (
-            "the whole-curve optimisation's curve failed verification; returning the "
-            'corridor curve',))
-        return Shaped(shaped.trajectory, initial, metrics, timed.warnings + warnings,
-                      fallback)
+        metrics = {'optimised': shaped.improved or timed is None,
+                   'coarse_iterations': coarse.iterations,
+                   'shape_iterations': shaped.iterations, 'shape_rounds': shaped.rounds,
+                   'spans': shaped.spans}
+        if timed is None:
+            metrics['coarse_cycle_time'] = coarse.trajectory.duration
+
+        def fallback() -> Shaped:
+            corridor_curve = timed or super(WholeCurve, self).finish(start)
+            return replace(corridor_curve, warnings=corridor_curve.warnings + (
+                "the whole-curve optimisation's curve failed verification; returning the "
+                'corridor curve',))
+
+        return Shaped(shaped.trajectory, start.estimate, metrics,
+                      (timed.warnings if timed else ()) + warnings, fallback)
 
 
 METHODS = {method.name: method for method in (KnotTiming, WholeCurve)}

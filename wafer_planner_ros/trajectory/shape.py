@@ -15,8 +15,10 @@ total time. Constraints:
   ``ShapeSettings.clearance`` (less where the start curve itself is closer, so that the
   start stays feasible).
 
-The start is the corridor curve (feasible by construction: inside its boxes, λ-scaled to
-every limit), with its knot vector refined first where it has few spans. SLSQP's method
+The start meets every limit: the corridor curve (also proven: inside its boxes, λ-scaled
+to every limit) or a curve fitted to the corridor (``coarse``: not proven, so never
+returned), or the optimum of that coarse stage; its knot vector is refined first where it
+has few spans. SLSQP's method
 solves with exact gradients (``shape_problem``; clearance from the closest points and the
 body Jacobian), its quadratic subproblems by daqp (``sqp``): about 1 ms an iteration for 16
 spans, where scipy's SLSQP took 4-6 ms (one BLAS thread) or 15-30 ms (two).
@@ -24,7 +26,7 @@ Each answer is scaled by its own λ (Eq. 12) to meet every limit everywhere (and
 further where it still exceeds one at the verification's times, ``meet_limits``), then
 proven collision-free; where a piece cannot be proven, clearance samples are added there
 and the problem is solved again. Only proven curves are kept: the fastest is returned, or
-the start when none beats it.
+the start (if proven) when none beats it.
 """
 
 from dataclasses import dataclass
@@ -54,8 +56,9 @@ in evaluating the curve never puts it beyond a limit (a point on the limit did, 
 class Shaping:
     """The outcome of the whole-curve optimisation."""
 
-    trajectory: CubicBSpline
-    """The fastest proven curve (the start when nothing beat it)."""
+    trajectory: Optional[CubicBSpline]
+    """The fastest proven curve: the start when nothing beat it, None when the start was not
+    proven and nothing was."""
     improved: bool
     iterations: int
     rounds: int
@@ -67,18 +70,24 @@ class Shaping:
 def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettings(),
                    timing: TimingSettings = TimingSettings(),
                    give_up_above: Optional[float] = None,
-                   deadline: Optional[float] = None) -> Optional[Shaping]:
+                   deadline: Optional[float] = None, proven: bool = True,
+                   first_proven: bool = False) -> Optional[Shaping]:
     """
-    Return the fastest proven curve from a feasible start (see the module).
+    Return the fastest proven curve from a start that meets every limit (see the module).
 
     ``give_up_above``: a cycle time (s) this curve need not beat; None is returned as soon
     as a solve's optimum, whose samples are a subset of the final ones, exceeds it by more
     than ``TimingSettings.give_up_margin``. ``deadline``: a ``time.monotonic()`` instant;
     the solver stops there and the fastest proven curve so far is returned (the start at
-    worst); with a deadline each solve stops at ``ShapeSettings.budget_ftol``.
+    worst); with a deadline each solve stops at ``ShapeSettings.budget_ftol``. ``proven``:
+    whether the start is proven collision-free (the corridor curve is; a curve fitted to the
+    corridor, ``coarse``, is not): if not, it is never returned. ``first_proven``: return
+    the first proven curve, not solving again where the wafer limit was exceeded between
+    samples (its λ-scaling meets the limit all the same, a little slower).
     """
     problem = ShapeProblem(start, cell, shape, timing)
-    best = current = problem.start
+    current = problem.start
+    best = current if proven else None
     spans = problem.spans
     inside = np.arange(shape.wafer_samples) / shape.wafer_samples
     wafer = (np.append(np.repeat(np.arange(spans), len(inside)), spans - 1),
@@ -120,9 +129,9 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
                      curve.duration, rescale, ratio.max(), proof.certified, intervals.min())
         if proof.certified:
             current = curve  # feasible everywhere: the next solve starts there
-            if curve.duration < best.duration:
+            if best is None or curve.duration < best.duration:
                 best = curve
-            if rescale <= 1.0 + timing.rescale_tolerance:
+            if first_proven or rescale <= 1.0 + timing.rescale_tolerance:
                 break
         else:
             # Sample the pieces that could not be proven, for every body, and solve again.
@@ -136,9 +145,9 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             peaks = peaks_over(ratio, timing.margin * (1.0 + 2e-4))
             wafer = (np.append(wafer[0], dense_span[peaks]),
                      np.append(wafer[1], dense_fraction[peaks]))
-    improved = best is not problem.start
+    improved = best is not None and best is not problem.start
     if not improved and not message:
-        message = 'no proven curve beat the start'
+        message = 'no proven curve beat the start' if proven else 'no curve was proven'
     return Shaping(best, improved, iterations, rounds, spans, message)
 
 
@@ -154,7 +163,8 @@ def _clearance_samples(problem: ShapeProblem, span, fraction,
     Return (span, fraction, body, kept) rows for the bodies near the walls at samples.
 
     ``kept``: the clearance a body keeps there, ``ShapeSettings.clearance`` or, where the
-    start curve is closer, half of the start's.
+    start curve is closer, half of the start's (where an unproven start touches a wall,
+    ``ShapeSettings.clearance``).
     """
     span, fraction = np.asarray(span, np.int64), np.asarray(fraction, float)
     start = problem.clearances(problem.start, span, fraction)               # (K, 4)
@@ -162,7 +172,8 @@ def _clearance_samples(problem: ShapeProblem, span, fraction,
     if every_body:
         near[:] = True
     k, body = np.nonzero(near)
-    kept = np.minimum(problem.settings.clearance, 0.5 * start[k, body])
+    wanted, start = problem.settings.clearance, start[k, body]
+    kept = np.where(start > 0.0, np.minimum(wanted, 0.5 * start), wanted)
     return span[k], fraction[k], body, kept
 
 
