@@ -12,9 +12,14 @@ each axis, everything else ignored: no motion is faster). Cycle time, planning m
 peak joint jerk for each; ratios to the peer; and where the whole-curve optimisation's
 planning time went, per cell and seed: each stage's share of it (``Planner.plan``'s
 ``timings_ms``: the drafts are ``spline``) and the timed parts of ``optimise``
-(``stopwatch.PARTS``: subproblems, rows, limits, proofs). Writes ``results/cycle.json``.
+(``stopwatch.PARTS``: subproblems, rows, limits, proofs). Then ``--joints`` (100) random
+free joint pairs per cell and seed (``bench_plan.random_pairs``, seeded by the roadmap seed):
+the whole-curve answer within the node's default budget, the unbudgeted one, the peer, each
+one's planning ms and the ratios (budgeted / unbudgeted, budgeted / peer). Writes
+``results/cycle.json``.
 
-Run: ``python bench/bench_cycle.py [--seeds 1 2 3] [--cells default pillar notched]``.
+Run: ``python bench/bench_cycle.py [--seeds 1 2 3] [--cells default pillar notched]
+[--joints 100]``.
 """
 
 import argparse
@@ -25,7 +30,7 @@ import platform
 import sys
 import time
 
-from bench_plan import toppra_time  # bench/: this script's folder is on the path
+from bench_plan import random_pairs, toppra_time  # bench/: this script's folder is on the path
 import numpy as np
 from peer import Peer
 
@@ -84,8 +89,8 @@ def ours(planner: Planner, start: str, goal: str, reference: bool = False,
             'stage_ms': {stage: result.timings_ms[stage] for stage in STAGES + PARTS}}
 
 
-def run(name: str, seed: int) -> dict:
-    """Return every pair of one cell and seed."""
+def run(name: str, seed: int, joints: int) -> dict:
+    """Return every station pair and ``joints`` random joint pairs of one cell and seed."""
     cell = Cell.from_yaml(CELLS[name])
     roadmap = load_or_build(cell, seed=seed).roadmap
     planners = {key: Planner(cell, roadmap, replace(settings))
@@ -100,8 +105,15 @@ def run(name: str, seed: int) -> dict:
         row['peer'] = peer.plan_stations(start, goal)
         rows.append(row)
         _print_row(row)
+    joint_rows = []
+    for start, goal in random_pairs(cell, joints, seed=seed):
+        row = {'from': start.tolist(), 'to': goal.tolist(),
+               'budget': ours(planners['budget'], start, goal, budget=BUDGET),
+               'ours': ours(planners['ours'], start, goal), 'peer': peer.plan(start, goal)}
+        joint_rows.append(row)
     return {'cell': cell.name, 'seed': seed, 'peer_build_seconds': peer.build_seconds,
-            'rows': rows, 'summary': _summary(rows)}
+            'rows': rows, 'summary': _summary(rows), 'joint_rows': joint_rows,
+            'joint_summary': _joint_summary(joint_rows)}
 
 
 def _ratio(row: dict, key: str):
@@ -126,6 +138,28 @@ def _summary(rows: list) -> dict:
                             worst_vs_peer=float(max(ratios)) if ratios else None,
                             at_most_peer=sum(x <= 1.0 for x in ratios), pairs=len(rows))
     out['bound'] = {'median_s': float(np.median([r['bound'] for r in rows]))}
+    return out
+
+
+def _joint_summary(rows: list) -> dict:
+    """Return the random joint pairs' ratios and planning times."""
+    def ratios(key, other):
+        return [r[key]['duration'] / r[other]['duration'] for r in rows
+                if r[key]['duration'] and r[other]['duration']]
+
+    out = {'pairs': len(rows)}
+    for key in ('budget', 'ours', 'peer'):
+        planning = [r[key]['planning_ms'] for r in rows]
+        out[key] = {'median_planning_ms': float(np.median(planning)),
+                    'p99_planning_ms': float(np.percentile(planning, 99)),
+                    'answered': sum(r[key]['duration'] is not None for r in rows)}
+    for name, (key, other) in {'budget_vs_ours': ('budget', 'ours'),
+                               'budget_vs_peer': ('budget', 'peer'),
+                               'ours_vs_peer': ('ours', 'peer')}.items():
+        values = ratios(key, other)
+        out[name] = {'median': float(np.median(values)) if values else None,
+                     'p90': float(np.percentile(values, 90)) if values else None,
+                     'worst': float(max(values)) if values else None}
     return out
 
 
@@ -155,6 +189,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--seeds', type=int, nargs='+', default=[1])
     parser.add_argument('--cells', nargs='+', choices=sorted(CELLS), default=list(CELLS))
+    parser.add_argument('--joints', type=int, default=100,
+                        help='random free joint pairs per cell and seed (default 100)')
     args = parser.parse_args()
     header = f"{'pair':<24}{'bound':>7}" + ''.join(
         f'{key + " s":>11}{"ms":>9}{"jerk":>8}' for key in (*OURS, 'peer'))
@@ -163,7 +199,7 @@ def main() -> int:
     for name in args.cells:
         for seed in args.seeds:
             print(f'\n{name}, seed {seed}\n{header}', flush=True)
-            result = run(name, seed)
+            result = run(name, seed, args.joints)
             runs.append(result)
             s = result['summary']
             print(f"median: bound {s['bound']['median_s']:.3f} s, " + ', '.join(
@@ -177,6 +213,20 @@ def main() -> int:
             print('where the planning time of ours went (all pairs): ' + ', '.join(
                 f'{stage} {100.0 * share[stage]:.1f} %' for stage in STAGES + PARTS
                 if share[stage] is not None), flush=True)
+            joint = result['joint_summary']
+            print(f"{joint['pairs']} random joint pairs: within the budget / unbudgeted "
+                  f"median {joint['budget_vs_ours']['median']:.3f} (p90 "
+                  f"{joint['budget_vs_ours']['p90']:.3f}, worst "
+                  f"{joint['budget_vs_ours']['worst']:.3f}); within the budget / the peer "
+                  f"median {joint['budget_vs_peer']['median']:.3f} (worst "
+                  f"{joint['budget_vs_peer']['worst']:.3f}); unbudgeted / the peer median "
+                  f"{joint['ours_vs_peer']['median']:.3f}; planning ms median (p99): budget "
+                  f"{joint['budget']['median_planning_ms']:.0f} "
+                  f"({joint['budget']['p99_planning_ms']:.0f}), unbudgeted "
+                  f"{joint['ours']['median_planning_ms']:.0f} "
+                  f"({joint['ours']['p99_planning_ms']:.0f}), peer "
+                  f"{joint['peer']['median_planning_ms']:.0f} "
+                  f"({joint['peer']['p99_planning_ms']:.0f})", flush=True)
     RESULTS.parent.mkdir(exist_ok=True)
     RESULTS.write_text(json.dumps({
         'benchmark': 'cycle times per station pair: ours, the paper, the peer, the bound',
