@@ -11,11 +11,14 @@ import numpy as np
 import pytest
 from tampered import digest, tamper
 
+from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service import table as table_module
 from wafer_planner_ros.service.settings import settings_from
+from wafer_planner_ros.service.table import build_and_store_table, inherited_table
 from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
 from wafer_planner_ros.service.table import save_table, table_key, table_path, TableError
 from wafer_planner_ros.trajectory.verify import verify
@@ -251,3 +254,35 @@ def test_a_file_of_the_first_format_is_planned_again(planner, built, tmp_path):
         load_table(planner, tmp_path)
     assert not load_or_build_table(planner, tmp_path).loaded
     assert load_table(planner, tmp_path).loaded
+
+
+def test_a_retaught_station_replans_only_its_own_pairs(default_cell, tmp_path, monkeypatch):
+    """Moved loadport2: its 4 pairs are planned; the other 8 inherited, each verified."""
+    cache = tmp_path / 'cache'
+    first = Planner(default_cell, load_or_build(default_cell, cache_dir=cache).roadmap)
+    build_and_store_table(first, cache)
+    text = default_cell_path().read_text().replace(
+        'loadport2: {wafer_center: [0.0, 0.26]', 'loadport2: {wafer_center: [0.03, 0.26]')
+    (tmp_path / 'cell.yaml').write_text(text)
+    moved = Cell.from_yaml(tmp_path / 'cell.yaml')
+    assert moved.digest != default_cell.digest
+    second = Planner(moved, load_or_build(moved, cache_dir=cache).roadmap)
+    planned, checked = [], []
+    plan, verified = second.plan, table_module._verified
+    monkeypatch.setattr(second, 'plan', lambda *a, **k: planned.append(a[:2]) or plan(*a, **k))
+    monkeypatch.setattr(table_module, '_verified',
+                        lambda p, pair, entry: checked.append(pair) or verified(p, pair, entry))
+    table = build_and_store_table(second, cache)
+    assert set(table.entries) == set(station_pairs(moved)) and not table.failures
+    assert all('loadport2' in pair for pair in planned) and len(planned) == 2  # + 2 reversed
+    inherited = [pair for pair in station_pairs(moved) if 'loadport2' not in pair]
+    assert sorted(checked) == sorted(inherited)  # every inherited entry verified
+    assert load_table(second, cache).entries.keys() == table.entries.keys()
+    for pair in station_pairs(moved):
+        answer = table.answer(second, *pair)
+        assert answer.verification.ok and np.array_equal(answer.positions[-1], answer.goal_q)
+    # Another robot (a limit changed): nothing is inherited.
+    robot = moved.robot
+    slower = replace(moved, robot=replace(robot, limits=replace(
+        robot.limits, velocity=0.9 * robot.limits.velocity)))
+    assert inherited_table(Planner(slower, second.roadmap), cache) is None

@@ -23,6 +23,15 @@ be (``_described``). An entry that fails is left out and listed in
 ``rejected`` with the reason, never answered from; ``build_table`` given the loaded table
 plans those pairs again (``load_or_build_table`` does, and stores the table). Files are
 written to a temporary name and renamed, so a crash never leaves half a file.
+
+A re-taught station re-plans only its own pairs: a file also stores the SHA-256 of what its
+plans depend on besides the stations (the cell without its stations and name, the planner's
+settings, the package version: ``basis``) and of each station as written. When no table
+matches the key, ``build_and_store_table`` takes from the newest file of the same basis
+(``MAX_DONORS`` looked at) the entries of the pairs whose two stations are unchanged
+(``inherited_table``), each verified in full as on any load, and plans only the others.
+The roadmap may differ (it is built for the whole cell): a verified curve does not depend
+on it.
 """
 
 from dataclasses import asdict, dataclass, field, replace
@@ -55,6 +64,8 @@ MAX_DURATION = 60.0
 station moves take seconds; checking a curve costs time and memory in proportion to it)."""
 MAX_ITEMS = 10000
 """Most vertices of a stored path, or warnings or counts of an entry."""
+MAX_DONORS = 20
+"""Most table files (the newest) looked at for entries to inherit."""
 MAX_TEXT = 1000
 """Most characters of a stored warning or count's name."""
 MEASURED = ('method', 'roadmap_path_vertices', 'path_vertices', 'control_points', 'branches',
@@ -88,6 +99,10 @@ class StationTable:
     method: str = 'whole-curve'
     """The curve method of the planner it was planned for (part of its key): what its
     answers report."""
+    basis: str = ''
+    """``table_basis`` of its planner: what its plans depend on besides the stations."""
+    stations: Dict[str, str] = field(default_factory=dict)
+    """``station_digests`` of its cell."""
     lengths: Dict[Tuple[str, str], dict] = field(default_factory=dict, repr=False)
     """Each pair's path lengths (``planner.path_lengths``), measured on its curve when it is
     first answered: the same every time, and most of an answer's work."""
@@ -118,6 +133,24 @@ def table_key(planner: Planner) -> str:
     text = json.dumps({'cell': planner.cell.digest, 'roadmap': planner.roadmap.digest,
                        'settings': settings, 'version': __version__}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def table_basis(planner: Planner) -> str:
+    """Return the SHA-256 of what a table's plans depend on besides its stations (hex)."""
+    cell = {name: value for name, value in planner.cell.canonical().items()
+            if name not in ('stations', 'name')}
+    settings = asdict(planner.settings)
+    settings.pop('sample_period')
+    text = json.dumps({'cell': cell, 'settings': settings, 'version': __version__},
+                      sort_keys=True, default=_plain)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def station_digests(cell) -> Dict[str, str]:
+    """Return each station's SHA-256 (hex) as written in the cell file."""
+    return {name: hashlib.sha256(json.dumps(dict(station.spec), sort_keys=True,
+                                            default=_plain).encode()).hexdigest()
+            for name, station in cell.stations.items()}
 
 
 def table_path(cache_dir, key: str) -> Path:
@@ -158,7 +191,8 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     return StationTable(table_key(planner), entries, verified, failures,
                         {} if loaded is None else dict(loaded.rejected),
                         time.perf_counter() - begun + (0.0 if loaded is None else loaded.seconds),
-                        method=planner.method.name)
+                        method=planner.method.name, basis=table_basis(planner),
+                        stations=station_digests(planner.cell))
 
 
 def save_table(table: StationTable, cache_dir) -> Path:
@@ -168,7 +202,7 @@ def save_table(table: StationTable, cache_dir) -> Path:
     failures = [[*pair, reason] for pair, reason in sorted(table.failures.items())]
     document = {'key': table.key, 'version': __version__, 'format': FORMAT,
                 'digest': _digest([entries, failures]), 'entries': entries,
-                'failures': failures}
+                'failures': failures, 'basis': table.basis, 'stations': table.stations}
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=TMP_SUFFIX, dir=path.parent)
     try:
@@ -231,7 +265,56 @@ def load_table(planner: Planner, cache_dir) -> StationTable:
         raise TableError(f'{path} lacks {len(missing)} station pairs, e.g. '
                          f'{"->".join(sorted(missing)[0])}')
     return StationTable(key, table, verified, failed, rejected, time.perf_counter() - begun,
-                        loaded=True, method=planner.method.name)
+                        loaded=True, method=planner.method.name, basis=table_basis(planner),
+                        stations=station_digests(planner.cell))
+
+
+def inherited_table(planner: Planner, cache_dir) -> Optional[StationTable]:
+    """
+    Return the entries an earlier table leaves for ``planner``, each verified, or None.
+
+    From the newest table file in ``cache_dir`` of the same ``table_basis`` that has any:
+    the entries of the pairs whose two stations are written as they are now. Files that
+    cannot be read, or whose content does not match its digest, are passed over.
+    """
+    begun = time.perf_counter()
+    basis, stations = table_basis(planner), station_digests(planner.cell)
+    known = set(station_pairs(planner.cell))
+    try:
+        files = sorted(Path(cache_dir).glob('table-*.json'),
+                       key=lambda path: path.stat().st_mtime, reverse=True)[:MAX_DONORS]
+    except OSError:
+        return None
+    for path in files:
+        try:
+            document = json.loads(path.read_text())
+            if document.get('basis') != basis or document.get('format') != FORMAT or \
+                    _digest([document['entries'], document['failures']]) != document['digest']:
+                continue
+            before = document['stations']
+            kept = {}
+            for entry in document['entries']:
+                pair = tuple(str(name) for name in entry['pair'])
+                if pair in known and all(before.get(name) == stations[name] for name in pair):
+                    kept[pair] = {name: value for name, value in entry.items() if name != 'pair'}
+        except Exception as exc:  # noqa: B902 - a file that cannot be read is passed over
+            logger.debug('station table: %s passed over (%s)', path, exc)
+            continue
+        entries, verified = {}, {}
+        for pair, entry in kept.items():
+            try:
+                checked = _verified(planner, pair, entry)
+            except Exception:  # noqa: B902 - an entry that cannot be read is not inherited
+                continue
+            if checked.ok:
+                entries[pair], verified[pair] = entry, checked
+        if entries:
+            logger.info('station table: %d of %d pairs inherited from %s (their stations '
+                        'unchanged), each verified', len(entries), len(known), path.name)
+            return StationTable(table_key(planner), entries, verified,
+                                seconds=time.perf_counter() - begun,
+                                method=planner.method.name, basis=basis, stations=stations)
+    return None
 
 
 def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> StationTable:
@@ -259,8 +342,11 @@ def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
     Build the table and, with a cache directory, store it (``warn`` if that fails).
 
     Given a table ``loaded`` from the cache, only its rejected pairs are planned (see
-    ``build_table``).
+    ``build_table``); without one, an earlier table's entries for unchanged stations are
+    inherited (``inherited_table``) and only the other pairs planned.
     """
+    if loaded is None and cache_dir is not None:
+        loaded = inherited_table(planner, cache_dir)
     table = build_table(planner, progress, loaded)
     if cache_dir is not None:
         try:
