@@ -18,7 +18,7 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
-from wafer_planner_ros.trajectory import methods, sqp
+from wafer_planner_ros.trajectory import methods, shape as shape_module, sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.coarse import coarse_start, fitted_points
 from wafer_planner_ros.trajectory.proof import prove
@@ -200,19 +200,23 @@ def test_the_coarse_curve_fits_the_polygon_at_rest_at_both_ends(default_cell):
     assert problem.scale_factor(curve.intervals) <= 1.0 + 1e-9
 
 
-def test_an_unproven_start_is_never_returned(default_cell, corridor):
-    """A start through a wall: only proven curves come back, or none at all."""
+def _colliding(cell, corridor) -> CubicBSpline:
+    """Return the corridor curve with three control points at a colliding configuration."""
     points = corridor.trajectory.control_points.copy()
-    model = default_cell.clearance_model
     # Three equal control points in the middle at a configuration that collides: the curve
     # passes through it.
     rng = np.random.default_rng(4)
-    lower, upper = default_cell.robot.limits.position.T
+    lower, upper = cell.robot.limits.position.T
     q = rng.uniform(lower, upper, (200, 3))
-    inside = q[model.clearance(q) <= 0.0][0]
     middle = len(points) // 2
-    points[middle - 1:middle + 2] = inside
-    start = CubicBSpline.from_intervals(points, corridor.trajectory.intervals)
+    points[middle - 1:middle + 2] = q[cell.clearance_model.clearance(q) <= 0.0][0]
+    return CubicBSpline.from_intervals(points, corridor.trajectory.intervals)
+
+
+def test_an_unproven_start_is_never_returned(default_cell, corridor):
+    """A start through a wall: only proven curves come back, or none at all."""
+    model = default_cell.clearance_model
+    start = _colliding(default_cell, corridor)
     assert not prove(start, model, default_cell.robot.lipschitz).certified
     late = optimise_shape(start, default_cell, deadline=time.monotonic() - 1.0, proven=False)
     assert late.trajectory is None and not late.improved  # no time: nothing proven
@@ -220,6 +224,30 @@ def test_an_unproven_start_is_never_returned(default_cell, corridor):
     assert shaped.trajectory is None or (
         shaped.improved and prove(shaped.trajectory, model,
                                   default_cell.robot.lipschitz).certified)
+
+
+def test_from_an_unproven_start_a_failed_solve_ends_the_optimisation(default_cell, corridor,
+                                                                     monkeypatch):
+    """A solver failure with nothing proven is not solved again with more samples."""
+    solves, limit = [], ShapeSettings().max_iterations
+
+    def stopped(iterations, message):
+        def solve(problem, start, *rest):
+            solves.append(start)
+            return shape_module._Solved(start.control_points, start.intervals, iterations,
+                                        message, False)
+        return solve
+
+    start = _colliding(default_cell, corridor)
+    monkeypatch.setattr(shape_module, '_solve', stopped(7, 'subproblem failed (flag -4)'))
+    shaped = optimise_shape(start, default_cell, proven=False)
+    assert shaped.trajectory is None and len(solves) == 1 and shaped.rounds == 1
+    assert shaped.message == 'no curve was proven (subproblem failed (flag -4))'
+    # At its iteration limit it is solved again with samples where the proof failed.
+    solves.clear()
+    monkeypatch.setattr(shape_module, '_solve', stopped(limit, 'iteration limit reached'))
+    shaped = optimise_shape(start, default_cell, proven=False)
+    assert shaped.trajectory is None and len(solves) == ShapeSettings().max_rounds
 
 
 def test_without_a_proven_coarse_curve_the_corridor_curve_starts_the_fine_stage(

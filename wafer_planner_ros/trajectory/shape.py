@@ -127,6 +127,12 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
         logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '
                      'proven %s, min span %.4f s', rounds, result.message, result.nit,
                      curve.duration, rescale, ratio.max(), proof.certified, intervals.min())
+        if not (proof.certified or proven or result.converged
+                or result.nit >= shape.max_iterations):
+            # From a start not proven the solver failed (not even its iteration limit) and
+            # nothing is proven: more samples would only make its problem harder.
+            message = f'no curve was proven ({result.message})'
+            break
         if proof.certified:
             current = curve  # feasible everywhere: the next solve starts there
             if best is None or curve.duration < best.duration:
