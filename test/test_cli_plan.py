@@ -33,7 +33,8 @@ def test_one_pair_as_json(roadmap_cache, capsys):
                 'roadmap'):
         assert key in plan
     assert plan['status'] == 'ok' and plan['from'] == 'loadport2'
-    assert set(plan['spline']) == {'degree', 'knots', 'control_points'}
+    assert set(plan['spline']) == {'kind', 'degree', 'knots', 'control_points'}
+    assert plan['spline']['kind'] == 'cubic-b-spline'
     assert set(plan['points'][0]) == {'t', 'q', 'qd', 'qdd'}
     assert set(plan['roadmap']) == {'nodes', 'edges', 'hash', 'seed', 'cache_hit'}
     assert plan['roadmap']['nodes'] >= 1500 and plan['roadmap']['seed'] == 0

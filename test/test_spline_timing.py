@@ -1,6 +1,7 @@
 """B-spline evaluation and derivatives, the corridor's proof, and the time optimisation."""
 
 from dataclasses import replace
+import json
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
+from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import TimingSettings
@@ -217,3 +219,24 @@ def test_a_timing_over_the_limits_is_slowed_just_enough_to_meet_them(default_cel
     # A timing that meets them is returned as it is.
     again, unchanged = problem.meet_limits(intervals)
     assert unchanged == 1.0 and np.array_equal(again, intervals)
+
+
+def test_a_described_curve_comes_back_as_the_kind_it_names():
+    rng = np.random.default_rng(5)
+    points = np.vstack([np.zeros((2, 3)), rng.uniform(-1.0, 1.0, (4, 3)), np.ones((2, 3))])
+    curve = CubicBSpline.from_intervals(points, rng.uniform(0.1, 0.5, len(points) - 3))
+    data = json.loads(json.dumps(curve.describe()))  # plain data, as stored
+    assert data['kind'] == 'cubic-b-spline'
+    back = Trajectory.from_description(data)
+    assert isinstance(back, CubicBSpline)
+    assert np.array_equal(back.knots, curve.knots)
+    assert np.array_equal(back.control_points, curve.control_points)
+    # Written before kinds were named: a cubic B-spline.
+    unnamed = {name: value for name, value in data.items() if name != 'kind'}
+    assert np.array_equal(Trajectory.from_description(unnamed).knots, curve.knots)
+    with pytest.raises(ValueError, match="unknown kind of curve 'quintic'"):
+        Trajectory.from_description(dict(data, kind='quintic'))
+    with pytest.raises(ValueError, match='degree 5'):
+        Trajectory.from_description(dict(data, degree=5))
+    t = np.linspace(0.0, curve.duration, 101)
+    assert np.allclose(curve.backwards().evaluate(t), curve.evaluate(t[::-1]), atol=1e-12)

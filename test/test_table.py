@@ -286,3 +286,16 @@ def test_a_retaught_station_replans_only_its_own_pairs(default_cell, tmp_path, m
     slower = replace(moved, robot=replace(robot, limits=replace(
         robot.limits, velocity=0.9 * robot.limits.velocity)))
     assert inherited_table(Planner(slower, second.roadmap), cache) is None
+
+
+def test_an_entry_of_an_unknown_kind_of_curve_is_rejected(planner, built, tmp_path):
+    save_table(built, tmp_path)
+    document = json.loads(table_path(tmp_path, built.key).read_text())
+    document['entries'][0]['trajectory']['kind'] = 'quintic'
+    document['digest'] = digest(document['entries'], document['failures'])
+    table_path(tmp_path, built.key).write_text(json.dumps(document))
+    loaded = load_table(planner, tmp_path)
+    pair = tuple(document['entries'][0]['pair'])
+    assert pair not in loaded.entries
+    assert "unknown kind of curve 'quintic'" in loaded.rejected[pair]
+    assert len(loaded.entries) == len(built.entries) - 1

@@ -50,7 +50,7 @@ from wafer_planner_ros import __version__
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import path_lengths, Planner, PlanResult
-from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
@@ -164,7 +164,7 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     Plan every station pair; ``progress(done, total, pair)`` after each.
 
     A pair whose reverse is already planned gets that trajectory backwards in time
-    (``CubicBSpline.backwards``), verified again: every limit, the clearance and the proof
+    (``Trajectory.backwards``), verified again: every limit, the clearance and the proof
     are the same for a motion and its reverse, so planning both directions would take
     twice as long for the same cycle time. Given a table ``loaded`` from the cache, only
     the pairs it rejected are planned; its entries and failures are kept.
@@ -406,7 +406,7 @@ def _verified(planner: Planner, pair, entry: dict) -> Verification:
     return checked
 
 
-def _described(curve: CubicBSpline, entry: dict) -> dict:
+def _described(curve: Trajectory, entry: dict) -> dict:
     """
     Return what an answer takes from a stored entry besides its verified curve, checked.
 
@@ -419,13 +419,12 @@ def _described(curve: CubicBSpline, entry: dict) -> dict:
     if not curve.duration <= initial < np.inf:
         raise ValueError(f'its initial cycle time {initial!r} is not a finite time at least '
                          f"the curve's {curve.duration:.6g} s")
-    paths = {}
+    paths, ends = {}, curve.evaluate([0.0, curve.duration])
     for name in ('roadmap_path', 'path'):
         path = np.asarray(entry[name], float)
         if path.ndim != 2 or path.shape[1] != 3 or not 2 <= len(path) <= MAX_ITEMS \
                 or not np.all(np.isfinite(path)) \
-                or not np.allclose(path[[0, -1]], curve.control_points[[0, -1]], rtol=0.0,
-                                   atol=1e-9):
+                or not np.allclose(path[[0, -1]], ends, rtol=0.0, atol=1e-9):
             raise ValueError(f"its {name} is not a path from the curve's start to its end")
         paths[name] = path
     warnings = entry['warnings']
@@ -453,10 +452,9 @@ def _ends(planner: Planner, pair, branches) -> list:
     return ends
 
 
-def _curve(entry: dict) -> CubicBSpline:
-    spline = entry['trajectory']
-    return CubicBSpline(np.asarray(spline['knots'], float),
-                        np.asarray(spline['control_points'], float))
+def _curve(entry: dict) -> Trajectory:
+    """Return an entry's curve, of the kind its description names."""
+    return Trajectory.from_description(entry['trajectory'])
 
 
 def _result(planner: Planner, pair, entry: dict, verification: Verification,
@@ -468,14 +466,16 @@ def _result(planner: Planner, pair, entry: dict, verification: Verification,
     times, positions, velocities, accelerations = trajectory.samples(
         planner.settings.sample_period)
     branches = [int(branch) for branch in entry['branches']]
+    # Measured on the curve: its description's control points (a kind without any has 0).
     metrics = dict(
         described['counts'], method=method,
         roadmap_path_vertices=len(described['roadmap_path']),
-        path_vertices=len(described['path']), control_points=len(trajectory.control_points),
+        path_vertices=len(described['path']),
+        control_points=len(trajectory.describe().get('control_points', ())),
         branches=branches, **lengths, source='table')
+    start_q, goal_q = trajectory.evaluate([0.0, trajectory.duration])
     return PlanResult(
-        start=start, goal=goal, start_q=trajectory.control_points[0],
-        goal_q=trajectory.control_points[-1], branches=tuple(branches),
+        start=start, goal=goal, start_q=start_q, goal_q=goal_q, branches=tuple(branches),
         trajectory=trajectory, initial_cycle_time=described['initial_cycle_time'],
         verification=verification, times=times, positions=positions, velocities=velocities,
         accelerations=accelerations, roadmap_path=described['roadmap_path'],

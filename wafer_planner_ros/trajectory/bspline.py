@@ -17,7 +17,7 @@ that is how the time optimisation differentiates it (complex step).
 from dataclasses import dataclass
 from functools import cached_property
 from math import factorial
-from typing import Optional
+from typing import ClassVar, Mapping, Optional
 
 import numpy as np
 
@@ -151,6 +151,8 @@ def _horner(coefficients, starts, span, t, order):
 class CubicBSpline(Trajectory):
     """A clamped cubic B-spline q(t) in joint space."""
 
+    kind: ClassVar[str] = 'cubic-b-spline'
+
     knots: np.ndarray
     """(n + 5,) times (s)."""
     control_points: np.ndarray
@@ -283,9 +285,16 @@ class CubicBSpline(Trajectory):
         return CubicBSpline.from_intervals(self.control_points[::-1], self.intervals[::-1])
 
     def describe(self) -> dict:
-        """Return the degree, the knots and the control points."""
-        return {'degree': DEGREE, 'knots': self.knots.tolist(),
+        """Return the kind, the degree, the knots and the control points."""
+        return {'kind': self.kind, 'degree': DEGREE, 'knots': self.knots.tolist(),
                 'control_points': self.control_points.tolist()}
+
+    @classmethod
+    def described(cls, data: Mapping) -> 'CubicBSpline':
+        """Return the spline ``describe`` gave (its degree, if given, must be 3)."""
+        if data.get('degree', DEGREE) != DEGREE:
+            raise ValueError(f"a cubic B-spline of degree {str(data['degree'])[:20]}")
+        return cls(np.asarray(data['knots'], float), np.asarray(data['control_points'], float))
 
     @cached_property
     def _pieces(self) -> tuple:

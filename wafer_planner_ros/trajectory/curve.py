@@ -3,17 +3,54 @@ What a timed joint-space curve offers to everything after the planner.
 
 In the spirit of toppra's ``AbstractGeometricPath`` and drake's ``Trajectory``: verification,
 reports, markers, recordings and figures use only this interface, never a particular kind
-of curve, so that a new way of shaping or timing one plugs in without touching them.
+of curve, so that a new way of shaping or timing one plugs in without touching them. A curve
+stored as plain data (``describe``, e.g. in the station table) comes back through
+``Trajectory.from_description``, which makes the kind of curve it names: each kind registers
+itself by its ``kind`` name when its class is defined.
 """
 
 from abc import ABC, abstractmethod
-from typing import Mapping, Optional, Sequence, Tuple
+from typing import ClassVar, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 
+UNNAMED_KIND = 'cubic-b-spline'
+"""The kind of a description that names none (written before kinds were named)."""
+
+
 class Trajectory(ABC):
     """A curve q(t) in joint space for t in [0, duration], starting and ending at rest."""
+
+    kind: ClassVar[str] = ''
+    """The name its descriptions give (``describe``); empty for an abstract kind."""
+    _kinds: ClassVar[Dict[str, type]] = {}
+
+    def __init_subclass__(cls, **options):
+        """Register a kind of curve by its ``kind`` name."""
+        super().__init_subclass__(**options)
+        if cls.kind:
+            Trajectory._kinds[cls.kind] = cls
+
+    @staticmethod
+    def from_description(data: Mapping) -> 'Trajectory':
+        """
+        Return the curve a ``describe`` gave, of the kind it names.
+
+        Raise ValueError when the kind is unknown or the data does not make such a curve;
+        whether the curve is a usable motion is ``ill_formed``'s to say.
+        """
+        kind = data.get('kind', UNNAMED_KIND)
+        made = Trajectory._kinds.get(kind) if isinstance(kind, str) else None
+        if made is None:
+            raise ValueError(f'unknown kind of curve {str(kind)[:80]!r} (known: '
+                             f'{", ".join(sorted(Trajectory._kinds))})')
+        return made.described(data)
+
+    @classmethod
+    @abstractmethod
+    def described(cls, data: Mapping) -> 'Trajectory':
+        """Return the curve of this kind that ``describe`` gave (raise ValueError if not)."""
 
     @property
     @abstractmethod
@@ -84,4 +121,8 @@ class Trajectory(ABC):
 
     @abstractmethod
     def describe(self) -> Mapping:
-        """Return the curve as plain data (lists and numbers) that defines it exactly."""
+        """Return the curve as plain data (lists and numbers, and its ``kind``) exactly."""
+
+    @abstractmethod
+    def backwards(self) -> 'Trajectory':
+        """Return the same motion backwards in time: q(T - t)."""
