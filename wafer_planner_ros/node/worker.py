@@ -26,6 +26,7 @@ itself is answered ``INTERNAL`` with the reason. On stop the threads are left as
 """
 
 from collections import deque
+import enum
 import gc
 import heapq
 import threading
@@ -54,6 +55,21 @@ PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
 NOT_LOADED = 'the roadmap is being loaded or built'
+
+
+class Phase(enum.Enum):
+    """What the loading side of the worker is doing (one at a time; see ``Worker.status``)."""
+
+    IDLE = None
+    """No load under way: the serving roadmap (if any) serves."""
+    LOADING = 'load'
+    """Reading the cell, loading or building the roadmap, loading the station table."""
+    COMPILING = 'kernels'
+    """The compiled kernels are missing from numba's cache: they are being compiled."""
+    PLANNING_TABLE = 'station_table'
+    """No station table was cached, or entries were rejected: it is being planned."""
+    STOPPING = 'stopping'
+    """Stopped: the threads take no more work (it is never left)."""
 
 
 class PlanningWorker:
@@ -93,20 +109,16 @@ class PlanningWorker:
         """The roadmap before the serving one, for requests received before it took over."""
         self._table = (None, None)
         """(loaded_ns of the roadmap it belongs to, the station table)."""
-        self._planning_table = False
-        """No station table was cached, or entries were rejected: it is being planned."""
-        self._compiling = False
-        """The compiled kernels are missing from numba's cache: they are being compiled."""
+        self._phase = Phase.LOADING
+        """What the loading side does (``Phase``); the first load starts at once."""
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
-        self._loading = True
         self.load_failed = False
         """The last load or rebuild failed (``last_load_error`` says why)."""
         self.last_load_error = ''
         self.counts = {'served': 0, 'failed': 0}
         self.last_error = ''
-        self._stopping = False
         self._threads = [threading.Thread(target=target, name=name, daemon=True) for name, target
                          in (('wafer_planner_worker', lambda: self._work(self._backlog)),
                              ('wafer_planner_table', lambda: self._work(self._lane)),
@@ -161,16 +173,15 @@ class PlanningWorker:
     def rebuild(self) -> bool:
         """Start reloading the cell and roadmap; False when a load is already under way."""
         with self.lock:
-            if self._loading:
+            if self._phase is not Phase.IDLE:
                 return False
-            self._loading = True
+            self._phase = Phase.LOADING
         try:
             loader = threading.Thread(target=self._load, name='wafer_planner_loader',
                                       daemon=True)
             loader.start()
         except Exception:
-            with self.lock:
-                self._loading = False
+            self._enter(Phase.IDLE)
             raise
         self._threads[-1] = loader
         return True
@@ -218,10 +229,8 @@ class PlanningWorker:
             cell = serving.planner.cell if serving is not None else self._loading_cell
             return {
                 'ready': serving is not None,
-                'busy_with': 'kernels' if self._compiling
-                else 'station_table' if self._planning_table
-                else 'load' if self._loading
-                else 'plan' if self._planned else None,
+                'busy_with': self._phase.value if self._phase not in (
+                    Phase.IDLE, Phase.STOPPING) else 'plan' if self._planned else None,
                 'cell': cell.name if cell is not None else None,
                 'nodes': roadmap.node_count if roadmap is not None else 0,
                 'edges': roadmap.edge_count if roadmap is not None else 0,
@@ -239,9 +248,7 @@ class PlanningWorker:
 
     def request_stop(self) -> None:
         """Have the threads stop taking work (see ``join``)."""
-        with self.lock:
-            self._stopping = True
-            self.lock.notify_all()
+        self._enter(Phase.STOPPING)
 
     def join(self, timeout: float) -> None:
         """
@@ -265,10 +272,10 @@ class PlanningWorker:
 
     def _not_ready(self) -> str:
         """Return why the node cannot answer yet; call with the lock held."""
-        if self._compiling:
+        if self._phase is Phase.COMPILING:
             return ('the planning kernels are being compiled for this machine (about 40 s; '
                     '`wafer-kernels` compiles them ahead)')
-        if self.load_failed and not self._loading:
+        if self.load_failed and self._phase is Phase.IDLE:
             return f'roadmap not loaded: {self.last_load_error}'
         return NOT_LOADED
 
@@ -276,9 +283,9 @@ class PlanningWorker:
         """Answer the requests of ``queue`` one at a time until stopped."""
         while True:
             with self.lock:
-                while not queue and not self._stopping:
+                while not queue and self._phase is not Phase.STOPPING:
                     self.lock.wait()
-                if self._stopping:
+                if self._phase is Phase.STOPPING:
                     return
                 item = queue.popleft()
                 if item[0] not in self._open:
@@ -300,7 +307,7 @@ class PlanningWorker:
         while True:
             with self.lock:
                 expired = []
-                while not expired and not self._stopping:
+                while not expired and self._phase is not Phase.STOPPING:
                     now = time.monotonic()
                     while self._deadlines and self._deadlines[0][0] <= now:
                         number = heapq.heappop(self._deadlines)[1]
@@ -310,7 +317,7 @@ class PlanningWorker:
                     if not expired:
                         self.lock.wait(self._deadlines[0][0] - now if self._deadlines
                                        else None)
-                if self._stopping:
+                if self._phase is Phase.STOPPING:
                     return
             for number, (request, _, timeout), planned, busy in expired:
                 doing = 'its planning did not finish' if planned else \
@@ -423,8 +430,7 @@ class PlanningWorker:
         except Exception as exc:  # noqa: B902 - the node stays up and says why
             self._load_failed(exc)
         finally:
-            with self.lock:
-                self._loading = False
+            self._enter(Phase.IDLE)
 
     def _load_roadmap(self) -> None:
         settings = self._settings()
@@ -454,8 +460,7 @@ class PlanningWorker:
             self._load_failed(exc)
             return
         finally:
-            with self.lock:
-                self._compiling = False
+            self._enter(Phase.LOADING)  # the kernels are loaded (or failed): no longer compiling
         table = None
         try:
             table = load_station_table(planner, settings, self._logger)
@@ -485,7 +490,8 @@ class PlanningWorker:
                 self._previous = self._serving
                 self._serving = Serving(planner, cached, loaded_ns)
                 self._table = (loaded_ns, table)
-                self._planning_table = table_to_plan(table, settings)
+                if table_to_plan(table, settings):
+                    self._enter(Phase.PLANNING_TABLE, locked=True)
                 self._loading_cell = None
                 self.load_failed, self.last_load_error = False, ''
                 self.lock.notify_all()
@@ -513,12 +519,22 @@ class PlanningWorker:
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         with self.lock:
-            self._table, self._planning_table = (loaded_ns, table), False
+            self._table = (loaded_ns, table)
+            self._enter(Phase.LOADING, locked=True)  # the table planned: the load ends
 
     def _kernels_compiling(self) -> None:
         """Say, in the status and to requests, that the kernels are being compiled."""
-        with self.lock:
-            self._compiling = True
+        self._enter(Phase.COMPILING)
+
+    def _enter(self, phase: Phase, locked: bool = False) -> None:
+        """Enter ``phase`` (never leaving ``STOPPING``); ``locked``: the lock is held."""
+        if not locked:
+            with self.lock:
+                self._enter(phase, locked=True)
+            return
+        if self._phase is not Phase.STOPPING:
+            self._phase = phase
+            self.lock.notify_all()
 
     def _load_failed(self, exc: Exception, cell_file=None) -> None:
         """Say why the load failed; the serving roadmap, if any, serves on."""
