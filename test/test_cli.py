@@ -104,13 +104,18 @@ def test_bad_node_count_exits_2(capsys):
 
 
 def test_replay_leaves_out_exactly_the_answers_a_time_budget_shaped():
-    from wafer_planner_ros.cli.replay import _budgeted, Replayer
+    from wafer_planner_ros.cli.replay import Replayer
     from wafer_planner_ros.recording.queries import Query, Result
+    from wafer_planner_ros.service.planning import within_budget
 
     def query(kind, values, budget=None):
         parameters = {} if budget is None else {'planning.optimise_budget': budget}
         return Query(number=0, kind=kind, topic='', received_ns=0, data=b'', request=None,
                      result=Result(0, 'r', '', values, 0), parameters=parameters)
+
+    def _budgeted(recorded):  # what the replay asks of the planning service
+        return within_budget(recorded.kind == 'station', recorded.result.values,
+                             recorded.parameters.get('planning.optimise_budget', 0.0))
     # A successful answer says which budget it had.
     assert _budgeted(query('joint', {'code': 'OK', 'budget': '0.2'}, budget=0.0))
     assert not _budgeted(query('joint', {'code': 'OK', 'budget': '0'}, budget=0.2))

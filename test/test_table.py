@@ -17,6 +17,7 @@ from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service import table as table_module
+from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_and_store_table, inherited_table
 from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
@@ -117,24 +118,25 @@ def test_an_entry_that_does_not_join_its_stations_is_rejected(planner, built, tm
 
 
 def test_a_request_is_answered_from_the_table_the_corridor_or_the_budget(planner, built):
-    from wafer_planner_ros.node.serving import plan_request
-    settings = replace(settings_from({}), optimise_budget=0.3)
+    budget = replace(settings_from({}), optimise_budget=0.3).optimise_budget
     deadline = time.monotonic() + 60.0
-    held = plan_request(planner, built, _Request('loadport1', 'loadlock1'), settings, deadline)
+    held = PlanningService(planner, built, budget).answer('loadport1', 'loadlock1', deadline)
     assert held.metrics['source'] == 'table' and set(held.timings_ms) == {'table', 'total'}
     # A station pair the table does not hold, or no table yet: the corridor curve.
     for table, request in ((built, _Request('loadport1', 'loadport2')),
                            (None, _Request('loadport1', 'loadlock1'))):
-        answer = plan_request(planner, table, request, settings, deadline)
+        answer = PlanningService(planner, table, budget).answer(*request, deadline)
         assert answer.metrics['method'] == 'knot-timing' and 'source' not in answer.metrics
     # Joint angles: the whole-curve optimisation within the budget, verified and proven.
     angles = _Request(list(planner.cell.stations['loadport1'].configs[0].q), 'loadlock2')
-    budgeted = plan_request(planner, built, angles, settings, deadline)
-    assert budgeted.metrics['method'] == 'whole-curve'
+    budgeted = PlanningService(planner, built, budget).answer(*angles, deadline)
+    assert budgeted.metrics['method'] == 'whole-curve' and budgeted.metrics['budget'] == budget
     assert budgeted.verification.ok and budgeted.verification.proof.certified
-    corridor = plan_request(planner, built, angles, replace(settings, optimise_budget=0.0),
-                            deadline)
+    corridor = PlanningService(planner, built, 0.0).answer(*angles, deadline)
     assert corridor.metrics['method'] == 'knot-timing'
+    # Unbudgeted (the tools, a replay): the planner's own method, as long as it takes.
+    whole = PlanningService(whole_curve(planner)).answer(*angles, deadline)
+    assert whole.metrics['method'] == 'whole-curve' and 'budget' not in whole.metrics
     assert budgeted.cycle_time <= corridor.cycle_time
 
 

@@ -13,6 +13,7 @@ from wafer_planner_ros.cli.common import write_json
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import error_json, plan_json, roadmap_json
+from wafer_planner_ros.service.planning import PlanningService, WHOLE_CURVE
 from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
 from wafer_planner_ros.service.table import load_or_build_table, load_table, TableError
 from wafer_planner_ros.trajectory.methods import METHODS
@@ -33,16 +34,13 @@ def plan_one(planner, start, goal, info, joint_names, stations=None) -> tuple:
     A pair whose stored entry the table rejected on load is never answered from the file:
     it is planned, with a warning on stderr naming it and why.
     """
+    if stations is not None and isinstance(start, str) and isinstance(goal, str):
+        rejected = stations.rejected.get((start, goal))
+        if rejected is not None:
+            print(f'warning: station table: {start} -> {goal} rejected ({rejected}); '
+                  'planned again', file=sys.stderr)
     try:
-        result = None
-        if stations is not None and isinstance(start, str) and isinstance(goal, str):
-            rejected = stations.rejected.get((start, goal))
-            if rejected is not None:
-                print(f'warning: station table: {start} -> {goal} rejected ({rejected}); '
-                      'planned again', file=sys.stderr)
-            result = stations.answer(planner, start, goal)
-        if result is None:
-            result = planner.plan(start, goal)
+        result = PlanningService(planner, stations).answer(start, goal)
     except PlanningError as exc:
         return None, error_json(exc.code.value, exc.message, start, goal, info)
     return result, plan_json(result, info, joint_names)
@@ -57,7 +55,7 @@ def station_table(args, planner, quiet: bool):
     Every cached entry is verified in full on load; one that fails is rejected and planned
     (for --all-pairs into the table, which is stored again).
     """
-    if planner.settings.method != 'whole-curve':
+    if planner.settings.method != WHOLE_CURVE:
         return None
     cache_dir = None if args.no_cache else args.cache_dir
     if not args.all_pairs:

@@ -7,7 +7,8 @@ and replayed answer and cycle time of each query. Exit 1 when any differs (code,
 time by more than ``--tolerance``). Answers that depended on the node's load at the time
 (BUSY, TIMEOUT, ROADMAP_NOT_READY) or on a time budget (``planning.optimise_budget``) are
 listed but not replayed; an answer from the station table is re-planned with the
-whole-curve optimisation that made the table. ``--publish`` sends the
+whole-curve optimisation that made the table (``service.planning``: the answer without a
+table or a budget, by the curve method the answer names). ``--publish`` sends the
 recorded requests to a running node at their recorded pace and compares its answers. A
 split recording is read whole (every file left in its directory, each holding the context
 of its queries), or one file of it alone.
@@ -26,6 +27,7 @@ from wafer_planner_ros.recording.compare import (DEFAULT_TOLERANCE, judge, OK, r
 from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query
 from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.service.planning import PlanningService, within_budget
 from wafer_planner_ros.service.requests import request_of, RequestError
 
 
@@ -85,7 +87,9 @@ class Replayer:
         """
         if query.code in NODE_ONLY_CODES:
             return '', None
-        if _budgeted(query):
+        values = query.result.values if query.result is not None else {}
+        if within_budget(query.kind == 'station', values,
+                         query.parameters.get('planning.optimise_budget', 0.0)):
             return '', None  # the optimisation stopped when its time was up
         try:
             if query.load is None:  # only a station request can be read without the cell
@@ -95,31 +99,10 @@ class Replayer:
                 return '', None
             planner = self.planner(query)
             request = request_of(query.kind, query.request, planner.cell.robot.joint_names)
-            result = planner.plan(request.start, request.goal)
+            result = PlanningService(planner).answer(request.start, request.goal)
         except (RequestError, PlanningError) as exc:
             return exc.code.value, None
         return OK, result.cycle_time
-
-
-def _budgeted(query: Query) -> bool:
-    """
-    Return whether the answer came from the time-budgeted optimisation.
-
-    A successful answer says so (``budget``); an error answer does not, so a joint request
-    planned while ``planning.optimise_budget`` was above 0 counts as budgeted.
-    """
-    values = query.result.values if query.result is not None else {}
-    if 'budget' in values:
-        return _positive(values['budget'])
-    return query.kind != 'station' and _positive(
-        query.parameters.get('planning.optimise_budget', 0.0))
-
-
-def _positive(text) -> bool:
-    try:
-        return float(text) > 0.0
-    except (TypeError, ValueError):
-        return False
 
 
 def main(argv=None) -> int:

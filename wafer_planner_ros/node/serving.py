@@ -6,24 +6,19 @@ build), waits for the compiled kernels (``node.startup``), loads the cached stat
 (``load_station_table``), which verifies every entry in full and leaves out those that
 fail, and hands it all over as a ``Serving``: from then on the node is ready. When the
 table was not cached, it is planned then, and when entries were rejected, those pairs
-(``build_station_table``; ``table_to_plan`` says whether).
-``plan_request`` chooses how a request is answered: a station pair from the table when it
-holds it; a station pair it does not hold (yet) by the corridor curve, which takes
-milliseconds; anything else by the whole-curve optimisation within
-``planning.optimise_budget`` seconds.
+(``build_station_table``; ``table_to_plan`` says whether). How a request is answered is
+``service.planning``'s to say.
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import time
 from typing import Optional
 
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
+from wafer_planner_ros.service.planning import whole_curve
 from wafer_planner_ros.service.table import build_and_store_table, load_table, StationTable
 from wafer_planner_ros.service.table import TableError
-
-MIN_BUDGET = 0.05
-"""s: a budget below this (the request's deadline is near) gets the corridor curve."""
 
 
 @dataclass(frozen=True)
@@ -52,7 +47,7 @@ def load_station_table(planner: Planner, settings, logger) -> Optional[StationTa
     if not settings.station_table or settings.cache_dir is None:
         return None
     try:
-        table = load_table(_whole_curve(planner), settings.cache_dir)
+        table = load_table(whole_curve(planner), settings.cache_dir)
     except TableError as exc:
         logger.info(f'station table: {exc}; planning it')
         return None
@@ -77,16 +72,10 @@ def build_station_table(planner: Planner, settings, logger,
         logger.info(f'station table: {done}/{total} pairs planned ({pair}, '
                     f'{time.monotonic() - begun:.1f} s)')
 
-    table = build_and_store_table(_whole_curve(planner), settings.cache_dir, progress,
+    table = build_and_store_table(whole_curve(planner), settings.cache_dir, progress,
                                   logger.warning, loaded)
     _report(table, logger)
     return table
-
-
-def _whole_curve(planner: Planner) -> Planner:
-    """Return the planner with the whole-curve optimisation as its method."""
-    return Planner(planner.cell, planner.roadmap,
-                   replace(planner.settings, method='whole-curve'))
 
 
 def _report(table: StationTable, logger) -> None:
@@ -107,21 +96,3 @@ def table_counts(table: tuple, serving: Optional[Serving]) -> dict:
     current = stations is not None and serving is not None and loaded_ns == serving.loaded_ns
     return {'station_table': len(stations) if current else 0,
             'station_table_rejected': len(stations.rejected) if current else 0}
-
-
-def plan_request(planner: Planner, table: Optional[StationTable], request, settings,
-                 deadline: float):
-    """Return the answer to a request (see the module); raise PlanningError."""
-    stations = isinstance(request.start, str) and isinstance(request.goal, str)
-    if stations and table is not None:
-        result = table.answer(planner, request.start, request.goal)
-        if result is not None:
-            return result
-    # The budget never eats the time the verification and the answer need: at most half of
-    # what is left before the request's deadline.
-    budget = min(settings.optimise_budget, 0.5 * (deadline - time.monotonic()))
-    if stations or budget < MIN_BUDGET:
-        return planner.plan(request.start, request.goal, deadline=deadline)
-    result = _whole_curve(planner).plan(request.start, request.goal, deadline=deadline,
-                                        budget=budget)
-    return replace(result, metrics=dict(result.metrics, budget=budget))

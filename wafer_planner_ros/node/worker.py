@@ -18,7 +18,7 @@ verification (``busy_with: station_table``), station pairs the table does not ho
 the corridor curve meanwhile. A rebuild does the same while the previous roadmap serves,
 and keeps it serving when it fails (``rebuild_failed`` in the status says why). Each
 request is planned on the roadmap in force when it was received, the one a recording pairs
-it with, and answered as ``serving.plan_request`` chooses. The worker never publishes: it
+it with, and answered as ``service.planning`` says. The worker never publishes: it
 hands every message, already serialised, to ``send``, which the node publishes from its
 executor. Every request gets exactly one answer, whatever happens: a failure of the node
 itself is answered ``INTERNAL`` with the reason. On stop the threads are left as they are
@@ -42,13 +42,14 @@ from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.node.serving import build_station_table, load_station_table
-from wafer_planner_ros.node.serving import plan_request, progress_reporter, Serving
+from wafer_planner_ros.node.serving import progress_reporter, Serving
 from wafer_planner_ros.node.serving import table_counts, table_to_plan
 from wafer_planner_ros.node.startup import (import_for_planning, kernels_ready,
                                             since_process_start)
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.service.planning import PlanningService
 from wafer_planner_ros.service.settings import NodeSettings
 
 PREVIOUS_KEPT_NS = 1_000_000_000
@@ -384,7 +385,8 @@ class PlanningWorker:
             begun = time.monotonic()
             table = table if loaded_ns == serving.loaded_ns else None
             try:
-                result = plan_request(planner, table, request, settings, deadline)
+                result = PlanningService(planner, table, settings.optimise_budget).answer(
+                    request.start, request.goal, deadline)
             except PlanningError as exc:
                 self._answer_error(number, request, exc.code, exc.message,
                                    (time.monotonic() - begun) * 1000.0, roadmap)

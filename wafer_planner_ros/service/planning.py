@@ -1,0 +1,95 @@
+"""
+How a request is answered: one policy for the node, ``wafer-plan`` and ``wafer-replay``.
+
+``PlanningService(planner, table, budget).answer(start, goal, deadline)``:
+
+- a station pair its station table holds: from the table (every entry verified in full
+  when it was loaded or planned; ``service.table``);
+- without a budget (``budget`` None: ``wafer-plan``, a replay): planned by ``planner`` with
+  its own curve method, as long as it takes (until ``deadline``, if any);
+- with a budget (the node: ``planning.optimise_budget`` s): a station pair the table does
+  not hold (yet: it is being planned) gets the corridor curve, which takes milliseconds;
+  anything else the whole-curve optimisation for at most the budget, and never more than
+  half of what is left before ``deadline``, so that the verification and the answer keep
+  their time; the best proven curve by then. A budget below ``MIN_BUDGET`` (or 0) gives the
+  corridor curve.
+
+A budgeted answer names its budget (``metrics['budget']``). Its cycle time depends on how
+fast the machine was, so a replay cannot reproduce it: ``within_budget`` tells such answers
+from the record of a query.
+"""
+
+from dataclasses import replace
+import time
+from typing import Mapping, Optional
+
+from wafer_planner_ros.planner import Planner, PlanResult
+from wafer_planner_ros.service.table import StationTable
+
+MIN_BUDGET = 0.05
+"""s: a budget below this (the request's deadline is near) gets the corridor curve."""
+WHOLE_CURVE = 'whole-curve'
+"""The curve method of the station table and of budgeted answers."""
+CORRIDOR = 'knot-timing'
+"""The curve method of budgeted station pairs the table does not hold: milliseconds."""
+
+
+class PlanningService:
+    """A planner, its station table as a cache, and how a request is answered (the module)."""
+
+    def __init__(self, planner: Planner, table: Optional[StationTable] = None,
+                 budget: Optional[float] = None):
+        """Answer with ``planner`` and ``table``; ``budget`` s of optimisation, or None."""
+        self.planner, self.table, self.budget = planner, table, budget
+
+    def answer(self, start, goal, deadline: Optional[float] = None) -> PlanResult:
+        """
+        Return the verified answer from ``start`` to ``goal`` (stations or joint angles).
+
+        ``deadline``: a ``time.monotonic()`` instant after which planning gives up with
+        TIMEOUT. Raises PlanningError with the code of the first reason it cannot answer.
+        """
+        stations = isinstance(start, str) and isinstance(goal, str)
+        if stations and self.table is not None:
+            result = self.table.answer(self.planner, start, goal)
+            if result is not None:
+                return result
+        if self.budget is None:
+            return self.planner.plan(start, goal, deadline=deadline)
+        budget = self.budget if deadline is None else \
+            min(self.budget, 0.5 * (deadline - time.monotonic()))
+        if stations or budget < MIN_BUDGET:
+            return _with_method(self.planner, CORRIDOR).plan(start, goal, deadline=deadline)
+        result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget)
+        return replace(result, metrics=dict(result.metrics, budget=budget))
+
+
+def whole_curve(planner: Planner) -> Planner:
+    """Return the planner with the whole-curve optimisation as its method."""
+    return _with_method(planner, WHOLE_CURVE)
+
+
+def _with_method(planner: Planner, method: str) -> Planner:
+    if planner.settings.method == method:
+        return planner
+    return Planner(planner.cell, planner.roadmap, replace(planner.settings, method=method))
+
+
+def within_budget(station_request: bool, values: Mapping, budget_parameter) -> bool:
+    """
+    Return whether a recorded answer came from the time-budgeted optimisation.
+
+    ``values``: the answer's result values; ``budget_parameter``: ``planning.optimise_budget``
+    when the request arrived. A successful answer says so (``budget``); an error answer does
+    not, so a joint request planned while the budget was above 0 counts as budgeted.
+    """
+    if 'budget' in values:
+        return _positive(values['budget'])
+    return not station_request and _positive(budget_parameter)
+
+
+def _positive(text) -> bool:
+    try:
+        return float(text) > 0.0
+    except (TypeError, ValueError):
+        return False
