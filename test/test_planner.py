@@ -12,6 +12,7 @@ from wafer_planner_ros.planner import Planner, PlannerSettings, STAGES
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.trajectory import methods
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS, Shaped
 from wafer_planner_ros.trajectory.stopwatch import collecting, PARTS, timed
@@ -317,3 +318,33 @@ def test_a_timed_block_adds_only_to_the_totals_collecting_around_it():
             pass
     assert set(outer) == {'optimise.qp', 'optimise.rows'} and set(inner) == {'optimise.rows'}
     assert outer['optimise.qp'] >= inner['optimise.rows'] >= 0.0
+
+
+def test_once_the_budget_is_spent_the_other_combinations_are_given_up(
+        default_cell, default_roadmap):
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    spent = planner.plan('loadport1', 'loadlock2', budget=1e-6)
+    assert spent.verification.ok and spent.verification.proof.certified
+    assert spent.metrics['candidates'] == 4 and spent.metrics['given_up'] == 3
+    whole = planner.plan('loadport1', 'loadlock2')
+    assert whole.metrics['given_up'] < 3 and whole.cycle_time < spent.cycle_time
+
+
+def test_a_whole_curve_answer_is_never_slower_than_its_lambda_scaled_start(
+        default_cell, default_roadmap, monkeypatch):
+    """A proven coarse curve slower than the corridor's start is not used (a failed solve)."""
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    real = methods.optimise_shape
+
+    def slow_coarse(start, cell, shape, *rest, **options):
+        shaped = real(start, cell, shape, *rest, **options)
+        if options.get('proven', True) or shaped is None or shaped.trajectory is None:
+            return shaped
+        curve = shaped.trajectory
+        slower = CubicBSpline.from_intervals(curve.control_points, 50.0 * curve.intervals)
+        return replace(shaped, trajectory=slower)
+
+    monkeypatch.setattr(methods, 'optimise_shape', slow_coarse)
+    result = planner.plan('loadport2', 'loadlock2', branches=(1, 1))
+    assert result.verification.ok and 'coarse_cycle_time' not in result.metrics
+    assert result.cycle_time <= result.initial_cycle_time

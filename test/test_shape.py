@@ -282,3 +282,15 @@ def test_the_fine_stage_never_returns_a_slower_curve_than_the_coarse_one(
     assert result.cycle_time <= result.metrics['coarse_cycle_time']
     assert result.verification.ok and not result.warnings
     assert made == []  # the corridor curve is made only when it is needed
+
+
+def test_a_proven_curve_slower_than_an_unproven_start_is_not_kept(default_cell, corridor,
+                                                                  monkeypatch):
+    """A failed solve can end on a far slower curve, proven all the same: it is not kept."""
+    def slower(problem, start, *rest):
+        return shape_module._Solved(start.control_points, 3.0 * start.intervals, 5,
+                                    'subproblem failed (flag -4)', False)
+
+    monkeypatch.setattr(shape_module, '_solve', slower)
+    shaped = optimise_shape(corridor.trajectory, default_cell, proven=False)
+    assert shaped.trajectory is None and not shaped.improved

@@ -196,7 +196,8 @@ class Planner:
         TIMEOUT. ``branches``: plan only this (start, goal) elbow-branch combination (None
         for joint angles), e.g. to see what each one costs. ``budget``: seconds from now
         after which a curve method that improves step by step returns the best curve it has
-        (verified like any other). Raises PlanningError with the code of the first reason it
+        (verified like any other), and the elbow-branch combinations not yet finished are
+        given up when one is. Raises PlanningError with the code of the first reason it
         cannot answer.
         """
         begun = time.perf_counter()
@@ -229,6 +230,11 @@ class Planner:
             if best is not None and pair.fastest >= best:
                 logger.debug('branches %s take at least %.3f s, the best so far %.3f s; '
                              'given up', pair.branches, pair.fastest, best)
+                given_up.append(pair)
+                continue
+            if best is not None and until is not None and time.monotonic() >= until:
+                logger.debug('branches %s not optimised: the time budget is spent',
+                             pair.branches)
                 given_up.append(pair)
                 continue
             candidate = self._finished(pair, best, stage_ms, until)

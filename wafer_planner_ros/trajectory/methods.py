@@ -141,6 +141,8 @@ class WholeCurve(KnotTiming):
             proven=False, first_proven=True)
         if coarse is None:
             return None  # its optimum is far slower than the best so far
+        if coarse.trajectory is not None and coarse.trajectory.duration >= start.estimate:
+            coarse = replace(coarse, trajectory=None)  # no faster than the corridor's start
         timed = None if coarse.trajectory is not None else super().finish(start)
         begin = coarse.trajectory if timed is None else timed.trajectory
         spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)

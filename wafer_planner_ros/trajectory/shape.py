@@ -135,7 +135,9 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             break
         if proof.certified:
             current = curve  # feasible everywhere: the next solve starts there
-            if best is None or curve.duration < best.duration:
+            # Kept only if faster than the best so far, or than the start when it is not
+            # proven (a failed solve can end on a far slower curve that is still proven).
+            if curve.duration < (problem.start if best is None else best).duration:
                 best = curve
             if first_proven or rescale <= 1.0 + timing.rescale_tolerance:
                 break
