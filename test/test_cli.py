@@ -120,7 +120,8 @@ def test_replay_leaves_out_exactly_the_answers_a_time_budget_shaped():
     assert _budgeted(query('joint', {'code': 'OK', 'budget': '0.2'}, budget=0.0))
     assert not _budgeted(query('joint', {'code': 'OK', 'budget': '0'}, budget=0.2))
     # An error does not: a joint request planned with a budget in force counts as budgeted;
-    # a station request never does (the table or the corridor curve answers it).
+    # a station request's never does (what fails it, an unknown station or no path, does
+    # not depend on the budget).
     assert _budgeted(query('joint', {'code': 'NO_PATH'}, budget=0.2))
     assert not _budgeted(query('joint', {'code': 'NO_PATH'}, budget=0.0))
     assert not _budgeted(query('station', {'code': 'NO_PATH'}, budget=0.2))

@@ -117,16 +117,21 @@ def test_an_entry_that_does_not_join_its_stations_is_rejected(planner, built, tm
     assert again.loaded and not again.rejected and set(again.entries) == set(pairs)
 
 
-def test_a_request_is_answered_from_the_table_the_corridor_or_the_budget(planner, built):
+def test_a_request_is_answered_from_the_table_or_within_the_budget(planner, built):
     budget = replace(settings_from({}), optimise_budget=0.3).optimise_budget
     deadline = time.monotonic() + 60.0
     held = PlanningService(planner, built, budget).answer('loadport1', 'loadlock1', deadline)
     assert held.metrics['source'] == 'table' and set(held.timings_ms) == {'table', 'total'}
-    # A station pair the table does not hold, or no table yet: the corridor curve.
+    # A station pair the table does not hold, or no table yet: the whole-curve optimisation
+    # within the budget, as for joint angles; without a budget, the corridor curve.
     for table, request in ((built, _Request('loadport1', 'loadport2')),
                            (None, _Request('loadport1', 'loadlock1'))):
         answer = PlanningService(planner, table, budget).answer(*request, deadline)
-        assert answer.metrics['method'] == 'knot-timing' and 'source' not in answer.metrics
+        assert answer.metrics['method'] == 'whole-curve' and 'source' not in answer.metrics
+        assert answer.metrics['budget'] == budget and answer.verification.proof.certified
+        corridor = PlanningService(planner, table, 0.0).answer(*request, deadline)
+        assert corridor.metrics['method'] == 'knot-timing'
+        assert answer.cycle_time < corridor.cycle_time
     # Joint angles: the whole-curve optimisation within the budget, verified and proven.
     angles = _Request(list(planner.cell.stations['loadport1'].configs[0].q), 'loadlock2')
     budgeted = PlanningService(planner, built, budget).answer(*angles, deadline)

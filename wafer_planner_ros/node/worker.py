@@ -14,8 +14,8 @@ loads the cached station
 table, and only then does the roadmap serve: the node is ready when it can answer, and
 until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. When no
 table was cached it is planned next, and so are the pairs whose cached entries failed
-verification (``busy_with: station_table``), station pairs the table does not hold getting
-the corridor curve meanwhile. A rebuild does the same while the previous roadmap serves,
+verification (``busy_with: station_table``), station pairs the table does not hold being
+planned within the budget meanwhile. A rebuild does the same while the previous roadmap serves,
 and keeps it serving when it fails (``rebuild_failed`` in the status says why). Each
 request is planned on the roadmap in force when it was received, the one a recording pairs
 it with, and answered as ``service.planning`` says. The worker never publishes: it

@@ -7,12 +7,12 @@ How a request is answered: one policy for the node, ``wafer-plan`` and ``wafer-r
   when it was loaded or planned; ``service.table``);
 - without a budget (``budget`` None: ``wafer-plan``, a replay): planned by ``planner`` with
   its own curve method, as long as it takes (until ``deadline``, if any);
-- with a budget (the node: ``planning.optimise_budget`` s): a station pair the table does
-  not hold (yet: it is being planned) gets the corridor curve, which takes milliseconds;
-  anything else the whole-curve optimisation for at most the budget, and never more than
-  half of what is left before ``deadline``, so that the verification and the answer keep
-  their time; the best proven curve by then. A budget below ``MIN_BUDGET`` (or 0) gives the
-  corridor curve.
+- with a budget (the node: ``planning.optimise_budget`` s): anything else (joint angles, a
+  station pair the table does not hold, or not yet: it is being planned) gets the
+  whole-curve optimisation for at most the budget, and never more than half of what is left
+  before ``deadline``, so that the verification and the answer keep their time; the best
+  proven curve by then. A budget below ``MIN_BUDGET`` (or 0) gives the corridor curve,
+  which takes milliseconds.
 
 A budgeted answer names its budget (``metrics['budget']``). Its cycle time depends on how
 fast the machine was, so a replay cannot reproduce it: ``within_budget`` tells such answers
@@ -31,7 +31,7 @@ MIN_BUDGET = 0.05
 WHOLE_CURVE = 'whole-curve'
 """The curve method of the station table and of budgeted answers."""
 CORRIDOR = 'knot-timing'
-"""The curve method of budgeted station pairs the table does not hold: milliseconds."""
+"""The curve method of requests whose budget is below ``MIN_BUDGET``: milliseconds."""
 
 
 class PlanningService:
@@ -58,7 +58,7 @@ class PlanningService:
             return self.planner.plan(start, goal, deadline=deadline)
         budget = self.budget if deadline is None else \
             min(self.budget, 0.5 * (deadline - time.monotonic()))
-        if stations or budget < MIN_BUDGET:
+        if budget < MIN_BUDGET:
             return _with_method(self.planner, CORRIDOR).plan(start, goal, deadline=deadline)
         result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget)
         return replace(result, metrics=dict(result.metrics, budget=budget))
@@ -81,7 +81,9 @@ def within_budget(station_request: bool, values: Mapping, budget_parameter) -> b
 
     ``values``: the answer's result values; ``budget_parameter``: ``planning.optimise_budget``
     when the request arrived. A successful answer says so (``budget``); an error answer does
-    not, so a joint request planned while the budget was above 0 counts as budgeted.
+    not, so a joint request planned while the budget was above 0 counts as budgeted. A
+    station request's error does not: what fails one (an unknown station, no path) does
+    not depend on the budget.
     """
     if 'budget' in values:
         return _positive(values['budget'])
