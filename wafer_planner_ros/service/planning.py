@@ -25,12 +25,13 @@ from typing import Mapping, Optional
 
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.service.table import StationTable
+from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 
 MIN_BUDGET = 0.05
 """s: a budget below this (the request's deadline is near) gets the corridor curve."""
-WHOLE_CURVE = 'whole-curve'
+WHOLE_CURVE = WholeCurve.name
 """The curve method of the station table and of budgeted answers."""
-CORRIDOR = 'knot-timing'
+CORRIDOR = KnotTiming.name
 """The curve method of requests whose budget is below ``MIN_BUDGET``: milliseconds."""
 
 
