@@ -128,7 +128,7 @@ class _Untimed(KnotTiming):
     name = 'untimed'
     speed_up = 1.0
 
-    def finish(self, draft, give_up_above=None, until=None):
+    def finish(self, draft, give_up_above=None, until=None, deadline=None):
         problem, (intervals, _) = draft.work
         return Shaped(CubicBSpline.from_intervals(problem.points, intervals / self.speed_up),
                       draft.estimate, {'speed_up': self.speed_up})

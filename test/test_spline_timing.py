@@ -9,6 +9,7 @@ from scipy.interpolate import BSpline
 
 from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
+from wafer_planner_ros.trajectory import timing as timing_module
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.curve import Trajectory
@@ -169,6 +170,25 @@ def test_lambda_start_is_feasible_and_the_optimum_is_faster(default_cell, defaul
         assert np.all(np.abs(acceleration) <= limits.acceleration + 1e-12)
         assert problem.dense_wafer_ratio(intervals)[0].max() <= MARGIN * (1 + 2e-4)
     assert timing.intervals.sum() < timing.initial_intervals.sum()
+
+
+@pytest.mark.parametrize('iterations', [0, 5, 20, 10 ** 5])
+def test_a_timing_stopped_at_its_deadline_meets_every_limit(monkeypatch, default_cell,
+                                                            default_roadmap, iterations):
+    # A clock that advances one second each time it is read: the solver, which reads it
+    # before each iteration, stops after ``iterations`` of them, wherever it is then.
+    corridor = _station_corridor(default_cell, default_roadmap, 'loadport3', 'loadlock1')
+    problem = TimingProblem(corridor.control_points, default_cell.robot)
+    optimum = optimise(problem).intervals.sum()
+    clock = iter(range(10 ** 6))
+    monkeypatch.setattr(timing_module.time, 'monotonic', lambda: float(next(clock)))
+    stopped = optimise(problem, deadline=float(iterations))
+    spline = CubicBSpline.from_intervals(corridor.control_points, stopped.intervals)
+    ratios = limit_ratios(spline, default_cell.robot)
+    assert max(ratios.values()) <= 1.0, ratios
+    assert optimum - 1e-9 <= stopped.intervals.sum() <= stopped.initial_intervals.sum() + 1e-9
+    if iterations == 10 ** 5:  # a deadline it never reaches changes nothing
+        assert stopped.optimised and stopped.intervals.sum() == pytest.approx(optimum, abs=1e-12)
 
 
 def _planner_corridor(cell, roadmap, start, goal):

@@ -237,7 +237,7 @@ class Planner:
                              pair.branches)
                 given_up.append(pair)
                 continue
-            candidate = self._finished(pair, best, stage_ms, until)
+            candidate = self._finished(pair, best, stage_ms, until, deadline)
             if candidate is None:
                 logger.debug('branches %s cannot beat %.3f s; given up', pair.branches, best)
                 given_up.append(pair)
@@ -264,7 +264,8 @@ class Planner:
                 return self._result(candidate, checked, counts, dict(
                     stage_ms, total=(time.perf_counter() - begun) * 1000.0))
             # Every faster one failed verification: finish those given up after all.
-            candidates = [self._finished(pair, None, stage_ms, until) for pair in given_up]
+            candidates = [self._finished(pair, None, stage_ms, until, deadline)
+                          for pair in given_up]
             given_up = []
         raise failure
 
@@ -293,12 +294,12 @@ class Planner:
         return _Prepared(a, b, qa, qb, branches, roadmap_path, path,
                          len(corridor.control_points), draft, fastest)
 
-    def _finished(self, pair: '_Prepared', give_up_above, stage_ms,
-                  until=None) -> Optional['_Candidate']:
+    def _finished(self, pair: '_Prepared', give_up_above, stage_ms, until=None,
+                  deadline=None) -> Optional['_Candidate']:
         """Return the finished curve, not yet verified; None if it cannot win."""
         clock = _Clock(stage_ms)
         with collecting(stage_ms):  # the optimisation's parts (``stopwatch.PARTS``)
-            shaped = self.method.finish(pair.draft, give_up_above, until)
+            shaped = self.method.finish(pair.draft, give_up_above, until, deadline)
         clock.lap('optimise')
         return None if shaped is None else _Candidate(pair, shaped)
 

@@ -172,14 +172,13 @@ def kernels_ready(logger, compiling: Callable[[], None] = lambda: None) -> None:
 
 def import_for_planning() -> None:
     """
-    Import what the first plans import when used (scipy's optimiser, trees and graphs).
+    Import what the first plans import when used (scipy's trees and graphs).
 
-    About 0.4 s of imports that the planner leaves to its first use, so that a tool that
+    About 0.3 s of imports that the planner leaves to its first use, so that a tool that
     never plans does not pay them: the node does them once it is ready, before the markers,
     so that the first requests find them done (with numba loaded from its cache instead of
     the build ahead of time, numba has imported much of scipy already).
     """
-    import scipy.optimize  # noqa: F401
     import scipy.sparse.csgraph  # noqa: F401
     import scipy.spatial  # noqa: F401
 

@@ -11,6 +11,7 @@ verification is replaced by its ``fallback`` when it has one. A method returns a
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, replace
+import time
 from typing import Callable, ClassVar, Mapping, Optional, Tuple
 
 from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
@@ -65,12 +66,15 @@ class CurveMethod(ABC):
 
     @abstractmethod
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
-               until: Optional[float] = None) -> Optional[Shaped]:
+               until: Optional[float] = None,
+               deadline: Optional[float] = None) -> Optional[Shaped]:
         """
         Return the finished curve; None once it shows it cannot beat ``give_up_above`` s.
 
         ``until``: a ``time.monotonic()`` instant by which a method that improves a curve
-        step by step returns the best it has.
+        step by step returns the best it has (the time budget). ``deadline``: the request's
+        (``time.monotonic()``), which no work may reach: what a method does beyond
+        ``until`` stops half-way to it, leaving time to verify and answer.
         """
 
 
@@ -91,10 +95,17 @@ class KnotTiming(CurveMethod):
         return Draft(float(start[0].sum()), (problem, start))
 
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
-               until: Optional[float] = None) -> Optional[Shaped]:
-        """Return the spline with optimised span durations (``timing.optimise``)."""
+               until: Optional[float] = None,
+               deadline: Optional[float] = None) -> Optional[Shaped]:
+        """
+        Return the spline with optimised span durations (``timing.optimise``).
+
+        The optimisation stops at ``until``, or half-way to ``deadline``, whichever comes
+        first, with the fastest timing it has.
+        """
         problem, start = draft.work
-        timing = optimise(problem, start, give_up_above)
+        stop = min((t for t in (until, _half_way(deadline)) if t is not None), default=None)
+        timing = optimise(problem, start, give_up_above, stop)
         if timing is None:
             return None
         warnings = () if timing.optimised else (
@@ -128,7 +139,8 @@ class WholeCurve(KnotTiming):
         return Draft(start.estimate, (start, corridor))
 
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
-               until: Optional[float] = None) -> Optional[Shaped]:
+               until: Optional[float] = None,
+               deadline: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
         start, corridor = draft.work
         shape = self.shape
@@ -143,7 +155,10 @@ class WholeCurve(KnotTiming):
             return None  # its optimum is far slower than the best so far
         if coarse.trajectory is not None and coarse.trajectory.duration >= start.estimate:
             coarse = replace(coarse, trajectory=None)  # no faster than the corridor's start
-        timed = None if coarse.trajectory is not None else super().finish(start)
+        # The corridor curve is what is returned then: its timing may take longer than the
+        # budget (its λ-scaled start is 1.5-3 x slower), up to half-way to the deadline.
+        timed = None if coarse.trajectory is not None else super().finish(
+            start, deadline=deadline)
         begin = coarse.trajectory if timed is None else timed.trajectory
         spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)
         shaped = optimise_shape(begin, self.cell, replace(shape, min_spans=spans),
@@ -168,6 +183,14 @@ class WholeCurve(KnotTiming):
 
         return Shaped(shaped.trajectory, start.estimate, metrics,
                       (timed.warnings if timed else ()) + warnings, fallback)
+
+
+def _half_way(deadline: Optional[float]) -> Optional[float]:
+    """Return the instant half-way from now to ``deadline`` (None: no deadline)."""
+    if deadline is None:
+        return None
+    now = time.monotonic()
+    return now + 0.5 * max(deadline - now, 0.0)
 
 
 METHODS = {method.name: method for method in (KnotTiming, WholeCurve)}
