@@ -14,7 +14,7 @@ trajectory has passed ``verify``; a request that cannot be answered raises
 from dataclasses import dataclass, field, replace
 import logging
 import time
-from typing import Mapping, Optional, Tuple
+from typing import Mapping, Optional, Tuple, Type
 
 import numpy as np
 
@@ -25,7 +25,8 @@ from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.curve import Trajectory
-from wafer_planner_ros.trajectory.methods import Draft, METHODS, Shaped
+from wafer_planner_ros.trajectory.methods import CurveMethod, Draft, KnotTiming, METHODS
+from wafer_planner_ros.trajectory.methods import Shaped
 from wafer_planner_ros.trajectory.stopwatch import collecting, PARTS
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
@@ -55,8 +56,9 @@ class PlannerSettings:
     """Size the safe boxes per body (beyond the paper; False: Eq. 3)."""
     extra_points: int = 1
     """Control points added on every straight stretch (beyond the paper)."""
-    method: str = 'knot-timing'
-    """How the curve through the corridor is shaped and timed (``trajectory.methods``)."""
+    method: Type[CurveMethod] = KnotTiming
+    """How the curve through the corridor is shaped and timed: a ``CurveMethod`` class
+    (``trajectory.methods``), or its name (``METHODS``: where settings come from text)."""
     timing: TimingSettings = TimingSettings()
     """The time optimiser's tuning."""
     shape: ShapeSettings = ShapeSettings()
@@ -71,9 +73,11 @@ class PlannerSettings:
                              f'{self.sample_period!r}')
         if not isinstance(self.extra_points, int) or self.extra_points < 0:
             raise ValueError(f'extra_points must be an integer >= 0, got {self.extra_points!r}')
-        if self.method not in METHODS:
+        method = METHODS.get(self.method) if isinstance(self.method, str) else self.method
+        if not (isinstance(method, type) and issubclass(method, CurveMethod)):
             raise ValueError(f'method must be one of {", ".join(sorted(METHODS))}, got '
                              f'{self.method!r}')
+        object.__setattr__(self, 'method', method)  # frozen: the class, whatever was given
 
     @classmethod
     def paper(cls, sample_period: float = 0.01) -> 'PlannerSettings':
@@ -141,7 +145,7 @@ class Planner:
         self.cell = cell
         self.roadmap = roadmap
         self.settings = settings
-        self.method = METHODS[settings.method](cell, settings.timing, settings.shape)
+        self.method = settings.method(cell, settings.timing, settings.shape)
 
     def endpoint(self, value, role: str) -> Endpoint:
         """Resolve a station name or three joint angles; raise PlanningError if unusable."""

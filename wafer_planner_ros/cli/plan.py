@@ -13,10 +13,10 @@ from wafer_planner_ros.cli.common import write_json
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import error_json, plan_json, roadmap_json
-from wafer_planner_ros.service.planning import PlanningService, WHOLE_CURVE
+from wafer_planner_ros.service.planning import PlanningService
 from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
 from wafer_planner_ros.service.table import load_or_build_table, load_table, TableError
-from wafer_planner_ros.trajectory.methods import METHODS
+from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS, WholeCurve
 
 
 def parse_end(text: str):
@@ -55,7 +55,7 @@ def station_table(args, planner, quiet: bool):
     Every cached entry is verified in full on load; one that fails is rejected and planned
     (for --all-pairs into the table, which is stored again).
     """
-    if planner.settings.method != WHOLE_CURVE:
+    if planner.settings.method is not WholeCurve:
         return None
     cache_dir = None if args.no_cache else args.cache_dir
     if not args.all_pairs:
@@ -119,7 +119,7 @@ def main(argv=None) -> int:
     try:
         settings = replace((PlannerSettings.paper if args.paper else PlannerSettings)(
             sample_period=args.sample_period), method=args.method or (
-                'knot-timing' if args.paper else 'whole-curve'))
+                KnotTiming if args.paper else WholeCurve))
     except ValueError as exc:
         raise UsageError(f'--sample-period: {exc}') from None
     requests = None if args.all_pairs else [(parse_end(args.start), parse_end(args.goal))]

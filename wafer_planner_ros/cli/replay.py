@@ -49,13 +49,13 @@ class Replayer:
         load = query.load
         period = float(query.parameters.get('trajectory.sample_period', 0.01))
         values = query.result.values if query.result is not None else {}
-        method = values.get('method') or PlannerSettings.method
+        method = PlannerSettings(method=values.get('method') or PlannerSettings.method).method
         key = (load.cell_text, load.values.get('roadmap_nodes'),
                load.values.get('roadmap_seed'))
         if key not in self._planners:
             self._planners[key] = self._load(load)
         planner = self._planners[key]
-        if planner.settings.sample_period != period or planner.settings.method != method:
+        if planner.settings.sample_period != period or planner.settings.method is not method:
             planner = Planner(planner.cell, planner.roadmap,
                               PlannerSettings(sample_period=period, method=method))
         return planner

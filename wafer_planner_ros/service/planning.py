@@ -24,18 +24,16 @@ from the record of a query.
 
 from dataclasses import replace
 import time
-from typing import Mapping, Optional
+from typing import Mapping, Optional, Type
 
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.service.table import StationTable
-from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
+from wafer_planner_ros.trajectory.methods import CurveMethod, KnotTiming, WholeCurve
 
 MIN_BUDGET = 0.05
-"""s: a budget below this (the request's deadline is near) gets the corridor curve."""
-WHOLE_CURVE = WholeCurve.name
-"""The curve method of the station table and of budgeted answers."""
-CORRIDOR = KnotTiming.name
-"""The curve method of requests whose budget is below ``MIN_BUDGET``: milliseconds."""
+"""s: a budget below this (the request's deadline is near) gets the corridor curve
+(``KnotTiming``: milliseconds) instead of the whole-curve optimisation (``WholeCurve``, the
+station table's method)."""
 
 
 class PlanningService:
@@ -63,18 +61,18 @@ class PlanningService:
         budget = self.budget if deadline is None else \
             min(self.budget, 0.5 * (deadline - time.monotonic()))
         if budget < MIN_BUDGET:
-            return _with_method(self.planner, CORRIDOR).plan(start, goal, deadline=deadline)
+            return _with_method(self.planner, KnotTiming).plan(start, goal, deadline=deadline)
         result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget)
         return replace(result, metrics=dict(result.metrics, budget=budget))
 
 
 def whole_curve(planner: Planner) -> Planner:
     """Return the planner with the whole-curve optimisation as its method."""
-    return _with_method(planner, WHOLE_CURVE)
+    return _with_method(planner, WholeCurve)
 
 
-def _with_method(planner: Planner, method: str) -> Planner:
-    if planner.settings.method == method:
+def _with_method(planner: Planner, method: Type[CurveMethod]) -> Planner:
+    if planner.settings.method is method:
         return planner
     return Planner(planner.cell, planner.roadmap, replace(planner.settings, method=method))
 

@@ -51,6 +51,7 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import path_lengths, Planner, PlanResult
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
@@ -96,7 +97,7 @@ class StationTable:
     """Wall time to build or load (s)."""
     loaded: bool = False
     """Whether it came from the cache as it is (no pair planned)."""
-    method: str = 'whole-curve'
+    method: str = WholeCurve.name
     """The curve method of the planner it was planned for (part of its key): what its
     answers report."""
     basis: str = ''
@@ -128,8 +129,7 @@ class StationTable:
 
 def table_key(planner: Planner) -> str:
     """Return the key of a planner's table (hex SHA-256)."""
-    settings = asdict(planner.settings)
-    settings.pop('sample_period')
+    settings = _plan_settings(planner)
     text = json.dumps({'cell': planner.cell.digest, 'roadmap': planner.roadmap.digest,
                        'settings': settings, 'version': __version__}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
@@ -139,11 +139,18 @@ def table_basis(planner: Planner) -> str:
     """Return the SHA-256 of what a table's plans depend on besides its stations (hex)."""
     cell = {name: value for name, value in planner.cell.canonical().items()
             if name not in ('stations', 'name')}
-    settings = asdict(planner.settings)
-    settings.pop('sample_period')
+    settings = _plan_settings(planner)
     text = json.dumps({'cell': cell, 'settings': settings, 'version': __version__},
                       sort_keys=True, default=_plain)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _plan_settings(planner: Planner) -> dict:
+    """Return the planner's settings its plans depend on, as JSON data (the method by name)."""
+    settings = asdict(planner.settings)
+    settings.pop('sample_period')
+    settings['method'] = planner.settings.method.name
+    return settings
 
 
 def station_digests(cell) -> Dict[str, str]:

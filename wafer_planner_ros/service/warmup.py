@@ -29,6 +29,7 @@ from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service import table  # noqa: F401 - its kernels count too
+from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 from wafer_planner_ros.trajectory.verify import verify
 
 WARM_NODES = 150
@@ -61,8 +62,8 @@ def compile_kernels(progress: Optional[Callable[[str], None]] = None) -> dict:
     say('a roadmap: sampling, clearance, certified edges')
     roadmap = load_or_build(cell, RoadmapSettings(nodes=WARM_NODES), cache_dir=None).roadmap
     stations = sorted(cell.stations)
-    for method, budget in (('knot-timing', None), ('whole-curve', None)):
-        say(f'planning by {method}')
+    for method, budget in ((KnotTiming, None), (WholeCurve, None)):
+        say(f'planning by {method.name}')
         planner = Planner(cell, roadmap, replace(PlannerSettings(), method=method))
         for start, goal in ((stations[0], stations[-1]), JOINT_PAIR):
             try:
