@@ -218,18 +218,17 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
         table_node, default_cell, monkeypatch):
     from node_harness import values
     from rclpy.parameter import Parameter
-    from wafer_planner_ros.node import worker
+    from wafer_planner_ros.service.planning import PlanningService
     timeout = 1.0
     pairs = _far_joint_requests(default_cell, 5)
+    answer = PlanningService.answer
 
-    class Stalled(worker.PlanningService):
+    def stalled(service, start, goal, deadline=None):
         """Plan as the node does, but the first request stalls (a stage overrunning)."""
-
-        def answer(self, start, goal, deadline=None):
-            if np.array_equal(start, pairs[0][0]) and np.array_equal(goal, pairs[0][1]):
-                time.sleep(3 * timeout)
-            return super().answer(start, goal, deadline)
-    monkeypatch.setattr(worker, 'PlanningService', Stalled)
+        if np.array_equal(start, pairs[0][0]) and np.array_equal(goal, pairs[0][1]):
+            time.sleep(3 * timeout)
+        return answer(service, start, goal, deadline)
+    monkeypatch.setattr(PlanningService, 'answer', stalled)
     table_node.node.set_parameters([Parameter('planning.timeout', value=timeout),
                                     Parameter('planning.max_queue', value=3)])
     try:

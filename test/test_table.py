@@ -145,6 +145,23 @@ def test_a_request_is_answered_from_the_table_or_within_the_budget(planner, buil
     assert budgeted.cycle_time <= corridor.cycle_time
 
 
+def test_the_service_answers_from_its_table_once_it_is_set(planner, built):
+    # The node's way: the service serves before its table is planned, then the table is set.
+    service = PlanningService(planner)
+    assert not service.holds('loadport1', 'loadlock1')
+    service.table = built
+    assert service.holds('loadport1', 'loadlock1')
+    assert not service.holds('loadport1', 'loadport2')          # not a pair of the table
+    assert not service.holds(list(planner.cell.stations['loadport1'].configs[0].q),
+                             'loadlock1')                        # joint angles
+    # A request's own budget and sample period: the same table answers.
+    coarse = service.using(0.3, 0.05)
+    assert coarse.table is built and coarse.budget == 0.3
+    answer = coarse.answer('loadport1', 'loadlock1')
+    assert answer.metrics['source'] == 'table'
+    assert np.allclose(np.diff(answer.times)[:-1], 0.05)
+
+
 def test_a_table_missing_pairs_is_refused_a_colliding_curve_rejected(planner, built, tmp_path):
     pairs = sorted(built.entries)
     short = replace(built, entries={pair: built.entries[pair] for pair in pairs[1:]})

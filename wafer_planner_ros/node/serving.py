@@ -1,13 +1,14 @@
 """
-A roadmap ready to serve: its planner, when it took over, and how it got there.
+A roadmap ready to serve: its planning service, when it took over, and how it got there.
 
 The worker's loading thread builds or loads a roadmap (``progress_reporter`` logs the
 build), waits for the compiled kernels (``node.startup``), loads the cached station table
 (``load_station_table``), which verifies every entry in full and leaves out those that
-fail, and hands it all over as a ``Serving``: from then on the node is ready. When the
-table was not cached, it is planned then, and when entries were rejected, those pairs
-(``build_station_table``; ``table_to_plan`` says whether). How a request is answered is
-``service.planning``'s to say.
+fail, and hands it all over as a ``Serving``: a ``service.planning.PlanningService`` with
+the table as its cache. From then on the node is ready. When the table was not cached, it
+is planned then, and when entries were rejected, those pairs (``build_station_table``;
+``table_to_plan`` says whether), and the service's table is replaced by the planned one.
+How a request is answered is the service's to say.
 """
 
 from dataclasses import dataclass
@@ -16,18 +17,28 @@ from typing import Optional
 
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
-from wafer_planner_ros.service.planning import whole_curve
+from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.table import build_and_store_table, load_table, StationTable
 from wafer_planner_ros.service.table import TableError
 
 
 @dataclass(frozen=True)
 class Serving:
-    """A loaded roadmap and its planner, and when it took over (``time.time_ns()``)."""
+    """
+    A loaded roadmap, its planning service, and when it took over (``time.time_ns()``).
 
-    planner: Planner
+    The service's station table belongs to this roadmap: it is set there once loaded or
+    planned.
+    """
+
+    service: PlanningService
     cached: CachedRoadmap
     loaded_ns: int
+
+    @property
+    def planner(self) -> Planner:
+        """Return the service's planner."""
+        return self.service.planner
 
 
 def progress_reporter(logger):
@@ -85,14 +96,13 @@ def _report(table: StationTable, logger) -> None:
                 f'{"loaded" if table.loaded else "planned"} in {table.seconds:.2f} s')
 
 
-def table_counts(table: tuple, serving: Optional[Serving]) -> dict:
+def table_counts(serving: Optional[Serving]) -> dict:
     """
-    Return the status counts of a (loaded_ns, station table) for ``serving``.
+    Return the status counts of the serving roadmap's station table.
 
     ``station_table``: the pairs it holds; ``station_table_rejected``: the entries of the
-    cached file it rejected on load. Both 0 without a table of the serving roadmap.
+    cached file it rejected on load. Both 0 without a table (or a serving roadmap).
     """
-    loaded_ns, stations = table
-    current = stations is not None and serving is not None and loaded_ns == serving.loaded_ns
-    return {'station_table': len(stations) if current else 0,
-            'station_table_rejected': len(stations.rejected) if current else 0}
+    stations = None if serving is None else serving.service.table
+    return {'station_table': len(stations) if stations is not None else 0,
+            'station_table_rejected': len(stations.rejected) if stations is not None else 0}

@@ -108,8 +108,6 @@ class PlanningWorker:
         self._serving: Optional[Serving] = None
         self._previous: Optional[Serving] = None
         """The roadmap before the serving one, for requests received before it took over."""
-        self._table = (None, None)
-        """(loaded_ns of the roadmap it belongs to, the station table)."""
         self._phase = Phase.LOADING
         """What the loading side does (``Phase``); the first load starts at once."""
         self._pending_ns: Optional[int] = None
@@ -148,8 +146,8 @@ class PlanningWorker:
             settings = self._settings()
             with self.lock:
                 serving = self._serving
-                waiting = None if serving is None else \
-                    self._lane if self._held(serving, request) else self._backlog
+                waiting = None if serving is None else self._lane \
+                    if serving.service.holds(request.start, request.goal) else self._backlog
                 if waiting is None:
                     code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {self._not_ready()}'
                 elif self._waiting(waiting) >= settings.max_queue:
@@ -242,7 +240,7 @@ class PlanningWorker:
                 'last_error': self.last_error,
                 'rebuild_failed': self.load_failed,
                 'last_rebuild_error': self.last_load_error,
-                **table_counts(self._table, serving),
+                **table_counts(serving),
                 'kernels_compiled': kernels.compiled_count(),
                 'kernels_ahead': kernels.ahead_count(),
             }
@@ -263,13 +261,6 @@ class PlanningWorker:
             thread.join(max(0.0, deadline - time.monotonic()))
 
     # ----------------------------------------------------------------- planning
-
-    def _held(self, serving: Serving, request) -> bool:
-        """Return whether the serving station table holds the request; call with the lock."""
-        loaded_ns, table = self._table
-        return table is not None and loaded_ns == serving.loaded_ns \
-            and isinstance(request.start, str) and isinstance(request.goal, str) \
-            and (request.start, request.goal) in table.entries
 
     def _not_ready(self) -> str:
         """Return why the node cannot answer yet; call with the lock held."""
@@ -366,7 +357,8 @@ class PlanningWorker:
             settings = self._settings()
             with self.lock:
                 deadline = self._open.get(number, (None, received + settings.timeout))[1]
-            planner, roadmap = serving.planner, serving.cached.roadmap
+            service = serving.service.using(settings.optimise_budget, settings.sample_period)
+            planner, roadmap = service.planner, serving.cached.roadmap
             joints = planner.cell.robot.joint_names
             angles = any(not isinstance(end, str) for end in (request.start, request.goal))
             if angles and request.read_for and tuple(request.read_for) != joints:
@@ -377,16 +369,9 @@ class PlanningWorker:
                                    f'but the roadmap it is planned on has {list(joints)} (a '
                                    'rebuild changed them): send it again', roadmap=roadmap)
                 return
-            if planner.settings.sample_period != settings.sample_period:
-                planner = Planner(planner.cell, planner.roadmap,
-                                  PlannerSettings(sample_period=settings.sample_period))
-            with self.lock:
-                loaded_ns, table = self._table
             begun = time.monotonic()
-            table = table if loaded_ns == serving.loaded_ns else None
             try:
-                result = PlanningService(planner, table, settings.optimise_budget).answer(
-                    request.start, request.goal, deadline)
+                result = service.answer(request.start, request.goal, deadline)
             except PlanningError as exc:
                 self._answer_error(number, request, exc.code, exc.message,
                                    (time.monotonic() - begun) * 1000.0, roadmap)
@@ -490,8 +475,8 @@ class PlanningWorker:
             with self.lock:
                 self._pending_ns = None  # first: planning waits while it is set
                 self._previous = self._serving
-                self._serving = Serving(planner, cached, loaded_ns)
-                self._table = (loaded_ns, table)
+                serving = self._serving = Serving(PlanningService(planner, table), cached,
+                                                  loaded_ns)
                 if table_to_plan(table, settings):
                     self._enter(Phase.PLANNING_TABLE, locked=True)
                 self._loading_cell = None
@@ -521,7 +506,7 @@ class PlanningWorker:
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         with self.lock:
-            self._table = (loaded_ns, table)
+            serving.service.table = table
             self._enter(Phase.LOADING, locked=True)  # the table planned: the load ends
 
     def _kernels_compiling(self) -> None:

@@ -1,7 +1,9 @@
 """
 How a request is answered: one policy for the node, ``wafer-plan`` and ``wafer-replay``.
 
-``PlanningService(planner, table, budget).answer(start, goal, deadline)``:
+``PlanningService(planner, table, budget).answer(start, goal, deadline)``, where the station
+table is the service's cache (``table``, which the node sets once it is planned; ``holds``
+says whether it answers a request at once):
 
 - a station pair its station table holds: from the table (every entry verified in full
   when it was loaded or planned; ``service.table``);
@@ -42,7 +44,29 @@ class PlanningService:
     def __init__(self, planner: Planner, table: Optional[StationTable] = None,
                  budget: Optional[float] = None):
         """Answer with ``planner`` and ``table``; ``budget`` s of optimisation, or None."""
-        self.planner, self.table, self.budget = planner, table, budget
+        self.planner, self.budget = planner, budget
+        self.table = table
+        """The station table (None: none, or not yet planned); it may be set at any time
+        (the node sets it once the table is planned)."""
+
+    def holds(self, start, goal) -> bool:
+        """Return whether the station table answers ``start`` to ``goal`` (at once)."""
+        return self._holding(start, goal) is not None
+
+    def _holding(self, start, goal) -> Optional[StationTable]:
+        """Return the station table if it holds ``start`` to ``goal``, else None."""
+        table = self.table  # read once: it may be set meanwhile
+        held = table is not None and isinstance(start, str) and isinstance(goal, str) \
+            and (start, goal) in table.entries
+        return table if held else None
+
+    def using(self, budget: Optional[float], sample_period: float) -> 'PlanningService':
+        """Return the service with another budget and sample period, and the same table."""
+        planner = self.planner
+        if planner.settings.sample_period != sample_period:
+            planner = Planner(planner.cell, planner.roadmap,
+                              replace(planner.settings, sample_period=sample_period))
+        return PlanningService(planner, self.table, budget)
 
     def answer(self, start, goal, deadline: Optional[float] = None) -> PlanResult:
         """
@@ -51,11 +75,9 @@ class PlanningService:
         ``deadline``: a ``time.monotonic()`` instant after which planning gives up with
         TIMEOUT. Raises PlanningError with the code of the first reason it cannot answer.
         """
-        stations = isinstance(start, str) and isinstance(goal, str)
-        if stations and self.table is not None:
-            result = self.table.answer(self.planner, start, goal)
-            if result is not None:
-                return result
+        table = self._holding(start, goal)
+        if table is not None:
+            return table.answer(self.planner, start, goal)
         if self.budget is None:
             return self.planner.plan(start, goal, deadline=deadline)
         budget = self.budget if deadline is None else \
