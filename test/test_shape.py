@@ -294,3 +294,34 @@ def test_a_proven_curve_slower_than_an_unproven_start_is_not_kept(default_cell, 
     monkeypatch.setattr(shape_module, '_solve', slower)
     shaped = optimise_shape(corridor.trajectory, default_cell, proven=False)
     assert shaped.trajectory is None and not shaped.improved
+
+
+def test_an_answer_stopped_far_over_the_limits_is_not_checked_at_length(default_cell,
+                                                                        corridor,
+                                                                        monkeypatch):
+    """
+    A budget's answer far over the limits is dropped, not checked every millisecond.
+
+    Stopped by the budget mid-solve, an answer 30 x too fast would scale to a curve far
+    slower than the start: it cannot be kept.
+    """
+    def stopped(problem, start, *rest):
+        return shape_module._Solved(start.control_points, start.intervals / 30.0, 3,
+                                    'stopped: the time budget ran out', False)
+
+    checked = []
+    meet_limits = TimingProblem.meet_limits
+
+    def spy(problem, intervals):
+        checked.append(float(np.sum(intervals)))
+        return meet_limits(problem, intervals)
+
+    clock = iter([0.0] + [10.0] * 1000)  # the round starts in time; the budget then ends
+    monkeypatch.setattr(shape_module, '_solve', stopped)
+    monkeypatch.setattr(TimingProblem, 'meet_limits', spy)
+    monkeypatch.setattr(shape_module.time, 'monotonic', lambda: next(clock))
+    shaped = optimise_shape(corridor.trajectory, default_cell, deadline=5.0)
+    assert checked == [] and shaped.rounds == 1
+    assert not shaped.improved and shaped.message == 'the time budget ran out'
+    # The start (refined: the same curve) is what it has.
+    assert shaped.trajectory.duration == pytest.approx(corridor.trajectory.duration, abs=1e-12)
