@@ -325,3 +325,16 @@ def test_an_answer_stopped_far_over_the_limits_is_not_checked_at_length(default_
     assert not shaped.improved and shaped.message == 'the time budget ran out'
     # The start (refined: the same curve) is what it has.
     assert shaped.trajectory.duration == pytest.approx(corridor.trajectory.duration, abs=1e-12)
+
+
+def test_a_budget_too_short_for_the_coarse_stage_still_gets_its_proven_curve(
+        default_cell, default_roadmap):
+    """The coarse stage runs on past the budget to its first proven curve (no deadline)."""
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    corridor = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2',
+                                                           branches=(1, 1))
+    late = planner.plan('loadport1', 'loadlock2', branches=(1, 1), budget=1e-6)
+    assert 'coarse_cycle_time' in late.metrics and not late.warnings
+    assert late.cycle_time == late.metrics['coarse_cycle_time']  # no time for the fine stage
+    assert late.verification.ok and late.verification.proof.certified
+    assert late.cycle_time < 0.8 * corridor.cycle_time

@@ -13,11 +13,12 @@ says whether it answers a request at once):
   station pair the table does not hold, or not yet: it is being planned) gets the
   whole-curve optimisation for at most the budget, and never more than half of what is left
   before ``deadline``, so that the verification and the answer keep their time; the best
-  proven curve by then. When it has proven none by then (one joint request in ten, on the
-  default cell), the answer is the corridor curve, whose timing runs on until it converges
-  or until half-way to ``deadline``: a curve 1.5-3.5 x slower than the optimum, where
-  its λ-scaled start was up to 9.9 x slower (31.6 s against 3.2 s). A budget below
-  ``MIN_BUDGET`` (or 0) gives the corridor curve, which takes milliseconds.
+  proven curve by then. When it has proven none by then (about one joint request in
+  eight, on the default cell), the coarse stage runs on to its first proven curve, a few
+  per cent from the optimum, up to half-way to ``deadline``; only if it proves none by
+  then is the answer the corridor curve (timed until it converges or half-way to what is
+  left), 1.5-3.5 x slower than the optimum. A budget below ``MIN_BUDGET`` (or 0) gives
+  the corridor curve, which takes milliseconds.
 
 A budgeted answer names its budget (``metrics['budget']``). Its cycle time depends on how
 fast the machine was, so a replay cannot reproduce it: ``within_budget`` tells such answers

@@ -120,16 +120,18 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             limits = TimingProblem(points, cell.robot, timing)
             ratio, dense_span, dense_fraction = limits.dense_wafer_ratio(intervals)
             rescale = limits.scale_factor(intervals, ratio.max())
+            scaled = rescale * intervals
             reference = problem.start if best is None else best
-            if deadline is not None and time.monotonic() >= deadline and \
-                    rescale * intervals.sum() >= reference.duration:
-                # Stopped mid-solve, far from meeting the limits: scaled, it cannot be kept,
-                # and checking it would cost time in proportion to its length (a budgeted
-                # joint request's took 2.4 s: 49 iterations in, it scaled to 4,825 s).
-                message = 'the time budget ran out'
-                break
-            curve = CubicBSpline.from_intervals(
-                points, limits.meet_limits(rescale * intervals)[0])
+            if scaled.sum() >= reference.duration:
+                # Scaled, it cannot be kept: not checked every millisecond as a curve that
+                # may be kept is, which costs time in proportion to its length (an answer
+                # stopped mid-solve, far over the limits, scaled to 4,825 s: 2.4 s).
+                if deadline is not None and time.monotonic() >= deadline:
+                    message = 'the time budget ran out'
+                    break
+            else:
+                scaled = limits.meet_limits(scaled)[0]
+            curve = CubicBSpline.from_intervals(points, scaled)
         with timed('optimise.proof'):
             proof = prove(curve, problem.model, cell.robot.lipschitz)
         logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '
