@@ -52,8 +52,9 @@ PARAMETERS: Tuple[Parameter, ...] = (
               'roadmap is loaded (kept in the cache directory) and answer them from it'),
     Parameter('planning.optimise_budget', 0.12,
               'seconds the whole-curve optimisation may spend on a request the station table '
-              'does not hold (the best proven curve by then is returned); 0: the corridor '
-              'curve only', 0.0, 600.0),
+              'does not hold (the best proven curve by then is returned; with none proven '
+              "yet, it runs on to its first, up to half-way to the request's deadline); 0: "
+              'the corridor curve only', 0.0, 600.0),
     Parameter('planning.max_queue', 32,
               'requests waiting to be planned; more are answered BUSY', 1, 10000),
     Parameter('recording.enabled', True, 'record every query to MCAP'),
