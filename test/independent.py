@@ -5,7 +5,8 @@ The spline is evaluated by scipy's BSpline from the knots and control points as 
 the wafer acceleration comes from second differences of forward-kinematics positions and
 the jerk from first differences of the acceleration (weighted averages of the true values,
 so never above their peaks); collisions are checked
-by python-fcl at configurations no more than 1 mrad apart in any joint.
+by python-fcl at configurations no more than 1 mrad apart in any joint; the port tolerances
+(``port_ratios``) from the stations as written, at every step.
 """
 
 import numpy as np
@@ -47,6 +48,7 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
     if robot.wafer_acceleration_norm_limit is not None:
         ratios['wafer_norm'] = float(np.max(np.hypot(*wafer.T))
                                      / robot.wafer_acceleration_norm_limit)
+    ratios.update(port_ratios(cell, q))
     for name, ratio in ratios.items():
         assert ratio <= 1.0 + 1e-6, f'{name} reaches {ratio} x its limit'
     # Collisions: consecutive checks at most 1 mrad apart.
@@ -61,6 +63,37 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
                            atol=tolerance), key
     assert np.array_equal(samples[-1]['q'], goal)
     return ratios
+
+
+def port_ratios(cell, q: np.ndarray) -> dict:
+    """
+    Return the largest offset from a port's axis and turn from its heading over tolerance.
+
+    Over the configurations ``q`` whose wafer is inside a port: its centre past the
+    retracted pose along the heading by more than its offset from the axis. From the
+    station as written in the cell file; 0 when the wafer enters no port.
+    """
+    robot = cell.robot
+    centre, heading = _wafer_centre(robot, q), np.sum(q, axis=-1)
+    lateral = turned = 0.0
+    for station in cell.stations.values():
+        port = station.spec.get('port')
+        if port is None:
+            continue
+        if 'joints' in station.spec:
+            joints = np.array(station.spec['joints'])
+            mouth, towards = _wafer_centre(robot, joints), float(np.sum(joints))
+        else:
+            mouth, towards = np.array(station.spec['wafer_center']), station.spec['heading']
+        axis = np.array([np.cos(towards), np.sin(towards)])
+        past = (centre - mouth) @ axis
+        off = (centre - mouth) @ np.array([-axis[1], axis[0]])
+        inside = past > np.abs(off)
+        if inside.any():
+            turn = np.angle(np.exp(1j * (heading[inside] - towards)))
+            lateral = max(lateral, np.abs(off[inside]).max() / port['lateral_tolerance'])
+            turned = max(turned, np.abs(turn).max() / port['heading_tolerance'])
+    return {'port_lateral': float(lateral), 'port_heading': float(turned)}
 
 
 def _wafer_centre(robot, q):

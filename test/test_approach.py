@@ -25,9 +25,9 @@ def test_on_the_curve_it_is_the_verified_minimum_clearance(plans, default_cell):
         assert 0.0 <= approach.time <= result.cycle_time
         np.testing.assert_array_equal(approach.q, result.trajectory.evaluate([approach.time])[0])
         assert model.clearance(approach.q)[0] == approach.contact.clearance
-    # loadport2 -> loadlock1 passes 0.3 mm from the loadport wall with the wafer.
+    # loadport2 -> loadlock1 passes 2.1 mm from a wall with the wafer.
     first = on_curve(model, plans[0].trajectory)
-    assert first.distance * 1000 == pytest.approx(0.3, abs=0.05)
+    assert first.distance * 1000 == pytest.approx(2.13, abs=0.05)
     assert (first.contact.body, first.contact.obstacle) == ('wafer', 'boundary')
 
 

@@ -21,8 +21,13 @@ def document():
 def test_default_cell_has_the_spec_values(default_cell):
     cell = default_cell
     assert cell.name == 'efem-3lp-2ll'
-    assert cell.boundary.tolist() == [[-0.85, -0.45], [0.85, -0.45], [0.85, 0.45],
-                                      [-0.85, 0.45]]
+    # The enclosure with a pocket for each port: 0.32 m wide, 0.16 m beyond the inside pose.
+    assert cell.boundary.tolist() == [
+        [-0.85, -0.45], [-0.66, -0.45], [-0.66, -0.77], [-0.34, -0.77], [-0.34, -0.45],
+        [0.34, -0.45], [0.34, -0.77], [0.66, -0.77], [0.66, -0.45], [0.85, -0.45],
+        [0.85, 0.45], [0.665, 0.45], [0.665, 0.77], [0.345, 0.77], [0.345, 0.45],
+        [0.16, 0.45], [0.16, 0.77], [-0.16, 0.77], [-0.16, 0.45], [-0.345, 0.45],
+        [-0.345, 0.77], [-0.665, 0.77], [-0.665, 0.45], [-0.85, 0.45]]
     assert cell.obstacles == ()
     r = cell.robot
     assert r.base.tolist() == [0.0, 0.0]
@@ -38,6 +43,13 @@ def test_default_cell_has_the_spec_values(default_cell):
     assert r.wafer_acceleration_norm_limit is None
     assert sorted(cell.stations) == ['loadlock1', 'loadlock2', 'loadport1', 'loadport2',
                                      'loadport3']
+    for station in cell.stations.values():
+        port = station.port
+        assert (port.depth, port.lateral_tolerance, port.heading_tolerance) == \
+            (0.35, 0.001, 0.0087)
+        np.testing.assert_allclose(port.inside_center, np.array(station.spec['wafer_center'])
+                                   + 0.35 * np.array([0.0, np.sign(station.spec['heading'])]),
+                                   atol=1e-5)
 
 
 def test_default_stations_reachable_on_both_branches_at_their_poses(default_cell):
@@ -58,8 +70,8 @@ def test_test_cells_cover_obstacles_and_irregular_boundaries(cell):
     single = [len(c.configs) for c in cell.stations.values()].count(1)  # elbow / joints
     # Each cell is there for what it covers; a cell not listed here fails.
     covers = {
-        'efem-3lp-2ll': (0, False, False, 0),  # the paper's: convex, empty, base at 0
-        'efem-pillar': (2, False, False, 2),   # obstacles, single-branch stations
+        'efem-3lp-2ll': (0, True, False, 0),  # the paper's, with port pockets, base at 0
+        'efem-pillar': (2, True, False, 2),   # obstacles, single-branch stations
         'efem-notched': (0, True, True, 0),    # a reflex corner, the base off the origin
     }
     assert cell.name in covers
@@ -115,7 +127,7 @@ BAD_VALUES = [
      'must be > 0'),
     ('stations.loadport2', {'wafer_center': [1.2, 0.0], 'heading': 0.0}, 'stations.loadport2',
      'unreachable'),
-    ('stations.loadport2', {'wafer_center': [0.0, 0.35], 'heading': 1.5708},
+    ('stations.loadport2', {'wafer_center': [0.25, 0.35], 'heading': 1.5708},
      'stations.loadport2', 'in collision (wafer vs boundary, overlap 50.0 mm)'),
     ('stations.loadlock1', {'joints': [-1.5708, 0.0, 0.0]}, 'stations.loadlock1',
      'in collision (elbow link vs boundary)'),
@@ -150,7 +162,7 @@ BAD_VALUES = [
     ('stations.loadport1', {'wafer_center': [0.0, 0.26], 'heading': 1e300},
      'stations.loadport1.heading', 'not a plausible heading'),
     ('robot.clearance_margin', -0.001, 'robot.clearance_margin', 'must be >= 0'),
-    ('robot.clearance_margin', 0.05, 'stations.loadport1',
+    ('robot.clearance_margin', 0.05, 'stations.loadport1.port',
      'within the clearance margin of 50.0 mm'),
 ]
 
@@ -173,6 +185,7 @@ def test_station_branch_in_collision_is_dropped_unless_demanded(document):
     doc = copy.deepcopy(document)
     doc['cell']['obstacles'] = [[[-0.30, -0.27], [-0.24, -0.27], [-0.24, -0.21],
                                  [-0.30, -0.21]]]
+    _without_ports(doc)  # the obstacle also blocks loadlock1's one channel
     cell = Cell.from_dict(copy.deepcopy(doc))
     assert [c.elbow for c in cell.stations['loadport1'].configs] == [1]
     doc['stations']['loadport1']['elbow'] = -1
@@ -248,6 +261,7 @@ def test_valid_enclosures_the_old_check_refused_are_accepted(document):
     alcove = [[-0.85, -0.45], [-0.1, -0.45], [-0.1, -0.5], [0.1, -0.5], [0.1, -0.45],
               [0.85, -0.45], [0.85, -0.45], [0.85, 0.45], [-0.85, 0.45], [-0.85, -0.45]]
     doc['cell']['boundary'] = alcove
+    _without_ports(doc)  # the pockets are gone
     doc['cell']['obstacles'] = [[[0.7, 0.0], [0.8, 0.0], [0.8, 0.1], [0.7, 0.1]][::-1]]
     cell = Cell.from_dict(doc)
     assert cell.boundary.tolist() == alcove[:6] + alcove[7:9]
@@ -256,6 +270,12 @@ def test_valid_enclosures_the_old_check_refused_are_accepted(document):
         'cell.boundary: vertex 6 repeats vertex 5 and was dropped')
     assert cross2(cell.obstacles[0][1] - cell.obstacles[0][0],
                   cell.obstacles[0][2] - cell.obstacles[0][1]) > 0  # made counter-clockwise
+
+
+def _without_ports(doc) -> None:
+    """Take every station's port out of a cell document."""
+    for station in doc['stations'].values():
+        station.pop('port', None)
 
 
 def _key_paths(node, prefix=()):

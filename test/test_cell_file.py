@@ -98,7 +98,7 @@ def test_a_file_near_the_size_limit_is_read(default_text):  # bench/bench_cell.p
      'stations.loadport2'),
     ('  loadlock1:', "  'loadport2': {wafer_center: [0.0, 0.2], heading: 1.5708}\n  loadlock1:",
      'stations.loadport2'),
-    ('[-0.505, 0.26], heading: 1.5708}', '[-0.505, 0.26], heading: 1.5708, heading: 0.0}',
+    ('[-0.505, 0.26], heading: 1.5708,', '[-0.505, 0.26], heading: 1.5708, heading: 0.0,',
      'stations.loadport1.heading'),
 ], ids=['top level', 'station', 'quoted station', 'in a station'])
 def test_duplicate_keys_are_refused_with_their_key_path(default_text, old, new, path, libyaml):
@@ -135,7 +135,8 @@ def test_numbers_are_read_as_yaml_1_2_writes_them(libyaml):
 @pytest.mark.parametrize('written', ['1.5e-1', '15e-2', '.15', '+1.5E-1'])
 def test_a_cell_with_exponent_numbers_validates(default_text, written):
     text = _edit(default_text, 'wafer_radius: 0.15', f'wafer_radius: {written}')
-    text = _edit(text, 'heading: 1.5708}\n  loadport3', 'heading: 15708e-4}\n  loadport3')
+    text = _edit(text, 'heading: 1.5708, port: {depth: 0.35}}\n  loadport3',
+                 'heading: 15708e-4, port: {depth: 0.35}}\n  loadport3')
     cell = Cell.from_dict(read_cell_yaml(text, 'cell.yaml'))
     assert cell.robot.wafer_radius == 0.15
     assert cell.stations['loadport2'].spec['heading'] == 1.5708

@@ -52,8 +52,8 @@ def test_contact_names_the_touching_body_and_obstacle(default_cell):
     # Arm straight down: the elbow link crosses the wall at y = -0.45.
     contact = model.contact(np.array([-np.pi / 2, 0.0, 0.0]))
     assert (contact.body, contact.obstacle, contact.crossing) == ('elbow link', 'boundary', True)
-    # Wafer pushed 2 cm into the top wall, spine inside: a measured overlap.
-    q = default_cell.robot.arm.inverse([0.0, 0.32], np.pi / 2,
+    # Wafer pushed 2 cm into the right wall, spine inside: a measured overlap.
+    q = default_cell.robot.arm.inverse([0.72, 0.0], 0.0,
                                        default_cell.robot.limits.position)[0].q
     contact = model.contact(q)
     assert (contact.body, contact.obstacle, contact.crossing) == ('wafer', 'boundary', False)

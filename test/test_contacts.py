@@ -28,29 +28,29 @@ def _colliding(cell, q):
 
 def test_a_wafer_pushed_into_the_wall_is_the_only_body_named(default_cell):
     robot = default_cell.robot
-    # loadport2's pose, 60 mm further towards the loadport wall (y = 0.45): the wafer edge
-    # reaches y = 0.32 + 0.15 = 0.47, 20 mm into the wall; the links stay clear.
-    for solution in robot.arm.inverse((0.0, 0.32), np.pi / 2, robot.limits.position):
+    # Heading for the right wall (x = 0.85): the wafer edge reaches x = 0.72 + 0.15 = 0.87,
+    # 20 mm into the wall; the links stay clear.
+    for solution in robot.arm.inverse((0.72, 0.0), 0.0, robot.limits.position):
         assert _colliding(default_cell, solution.q) == {
             'wafer': 'wafer vs boundary, overlap 20.0 mm'}
         wafer = body_contacts(default_cell.clearance_model, solution.q)[3]
-        np.testing.assert_allclose(wafer.wall_point, [0.0, 0.45], atol=1e-9)
-        np.testing.assert_allclose(wafer.spine_point, [0.0, 0.32], atol=1e-9)
+        np.testing.assert_allclose(wafer.wall_point, [0.85, 0.0], atol=1e-9)
+        np.testing.assert_allclose(wafer.spine_point, [0.72, 0.0], atol=1e-9)
 
 
 def test_an_arm_through_the_wall_names_each_body_and_how(default_cell):
-    # Straight along +y: the shoulder link ends 30 mm short of the wall, the elbow link
-    # crosses it, the wrist link and the wafer lie beyond it.
-    contacts = body_contacts(default_cell.clearance_model, [np.pi / 2, 0.0, 0.0])
+    # Straight along -y (between the loadlocks' pockets): the shoulder link ends 30 mm
+    # short of the wall, the elbow link crosses it, the wrist link and the wafer lie beyond.
+    contacts = body_contacts(default_cell.clearance_model, [-np.pi / 2, 0.0, 0.0])
     assert _free_bodies(contacts) == ['shoulder link']
     assert contacts[0].clearance == pytest.approx(0.03, abs=1e-9)
-    assert _colliding(default_cell, [np.pi / 2, 0.0, 0.0]) == {
+    assert _colliding(default_cell, [-np.pi / 2, 0.0, 0.0]) == {
         'elbow link': 'elbow link crosses boundary',
         'wrist link': 'wrist link beyond boundary',
         'wafer': 'wafer beyond boundary'}
     assert contacts[1].crossing and not contacts[1].outside
     assert contacts[2].outside and contacts[3].outside
-    np.testing.assert_allclose(contacts[1].wall_point, [0.0, 0.45], atol=1e-9)
+    np.testing.assert_allclose(contacts[1].wall_point, [0.0, -0.45], atol=1e-9)
 
 
 def test_a_wafer_in_the_pillar_names_the_obstacle():
@@ -148,8 +148,8 @@ def test_the_clearance_margin_makes_a_near_body_collide(default_cell_file):
     margin_cell = Cell.from_text(text.replace(line, line + '\n  clearance_margin: 0.005'),
                                  'margin.yaml')
     robot = margin_cell.robot
-    # The wafer 3 mm from the loadport wall: free without the margin, within it with it.
-    q = robot.arm.inverse((0.0, 0.297), np.pi / 2, robot.limits.position)[0].q
+    # The wafer 3 mm from the right wall: free without the margin, within it with it.
+    q = robot.arm.inverse((0.697, 0.0), 0.0, robot.limits.position)[0].q
     assert robot.clearance_margin == 0.005
     assert _colliding(margin_cell, q) == {
         'wafer': 'wafer vs boundary, 3.0 mm apart: within the clearance margin of 5.0 mm'}

@@ -34,8 +34,9 @@ TOPICS = [Topic(STATION, 'std_msgs/msg/String'),
           Topic(MARKERS, 'visualization_msgs/msg/MarkerArray')]
 SPECIAL_ID = '<b>&"$x$'
 """A request id that HTML and matplotlib's mathtext would both misread."""
-IN_THE_WALL = [0.139339, 2.862914, -1.431457]
-"""loadport2's pose 60 mm towards the loadport wall: the wafer 20 mm into it, nothing else."""
+IN_THE_WALL = [-0.807004, 2.375021, 0.002779]
+"""The wafer at (0.25, 0.32), between two pockets: 20 mm into the loadport wall, nothing
+else."""
 REQUESTS = [('q1', 'loadport1', 'loadlock1'),
             (SPECIAL_ID, 'loadlock1', 'loadport2'),
             ('q3', 'loadport1', 'nowhere'),
@@ -325,7 +326,7 @@ def test_a_start_in_collision_figure_fills_the_colliding_body(bag, tmp_path, def
     legend = [text.get_text() for text in axis.get_legend().get_texts()]
     assert 'start collides: wafer vs boundary, overlap 20.0 mm' in legend
     assert sum('collides' in text for text in legend) == 1  # the wafer alone
-    # In the picture: the wafer filled light red round its centre (0, 0.32), the wall it
+    # In the picture: the wafer filled light red round its centre (0.25, 0.32), the wall it
     # hits (y = 0.45) drawn pure red.
     image = imread(png)[..., :3]
     height = image.shape[0]
@@ -339,8 +340,9 @@ def test_a_start_in_collision_figure_fills_the_colliding_body(bag, tmp_path, def
     red, green, blue = image[..., 0], image[..., 1], image[..., 2]
     fill = (red > 0.95) & (np.abs(green - 0.55) < 0.06) & (np.abs(blue - 0.55) < 0.06)
     wall = (red > 0.95) & (green < 0.1) & (blue < 0.1)
-    assert fill.sum() > 500 and wall.sum() > 500
-    np.testing.assert_allclose(centre(fill), [0.0, 0.32], atol=0.02)
+    # The wall between the two pockets is 0.185 m long: a short red line.
+    assert fill.sum() > 500 and wall.sum() > 100
+    np.testing.assert_allclose(centre(fill), [0.25, 0.32], atol=0.02)
     assert centre(wall)[1] == pytest.approx(0.45, abs=0.01)
 
 

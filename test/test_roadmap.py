@@ -33,7 +33,7 @@ def test_all_stations_in_one_component_and_every_pair_has_a_path(cell, roadmap):
     for a, b in _pairs(cell):
         for _, i in roadmap.stations[a]:
             for _, j in roadmap.stations[b]:
-                found = find_path(roadmap, cell.clearance_model, cell.robot.lipschitz,
+                found = find_path(roadmap, cell.motion_model, cell.motion_model.lipschitz,
                                   roadmap.nodes[i], roadmap.nodes[j])
                 assert found.path is not None, f'no path {a} -> {b}'
                 assert found.nodes[0] == i and found.nodes[-1] == j
@@ -49,7 +49,7 @@ def test_station_nodes_are_the_station_configurations(cell, roadmap):
 
 
 def test_nodes_are_free_and_clearances_stored(cell, roadmap):
-    fresh = cell.clearance_model.body_clearance(roadmap.nodes)
+    fresh = cell.motion_model.body_clearance(roadmap.nodes)  # the port margins too
     assert np.array_equal(fresh, roadmap.clearance)
     assert np.all(fresh > 0)
 
@@ -88,7 +88,7 @@ def test_progress_is_reported_until_done(default_cell):
 
 def test_arbitrary_configurations_connect_at_query_time(cell, roadmap):
     rng = np.random.default_rng(41)
-    model, lipschitz = cell.clearance_model, cell.robot.lipschitz
+    model, lipschitz = cell.motion_model, cell.motion_model.lipschitz
     limits = cell.robot.limits.position
     q = rng.uniform(limits[:, 0], limits[:, 1], (200, 3))
     q = q[model.clearance(q) > 0][:20]
@@ -141,6 +141,7 @@ class _Solid:
     """A clearance model of a cell with no free space at all."""
 
     body_count = 4
+    lipschitz = np.ones((4, 3))
 
     def body_clearance(self, q):
         return -np.ones((len(np.atleast_2d(q)), 4))
@@ -153,6 +154,6 @@ def test_build_gives_up_with_a_clear_error_when_nothing_is_free(default_cell_fil
     from wafer_planner_ros.cell.model import Cell
     from wafer_planner_ros.errors import WaferPlannerError
     cell = Cell.from_yaml(default_cell_file)
-    cell.__dict__['clearance_model'] = _Solid()  # a fresh cell, so no fixture is affected
+    cell.__dict__['motion_model'] = _Solid()  # a fresh cell, so no fixture is affected
     with pytest.raises(WaferPlannerError, match='no free configuration in 10000 draws'):
         build_roadmap(cell, RoadmapSettings(nodes=100))

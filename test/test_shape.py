@@ -124,7 +124,7 @@ def test_the_rows_are_the_limits_and_clearances_they_stand_for(default_cell, cor
     # Clearance: (d - kept) / CLEARANCE_SCALE for the body named.
     span, fraction, body, kept = clearance
     t = curve.breaks()[span] + intervals[span] * fraction
-    distance = default_cell.clearance_model.body_clearance(reference(t))[np.arange(len(t)), body]
+    distance = default_cell.motion_model.body_clearance(reference(t))[np.arange(len(t)), body]
     assert np.allclose(values[-len(t):], (distance - kept) / CLEARANCE_SCALE, atol=1e-9)
 
 
@@ -215,15 +215,14 @@ def _colliding(cell, corridor) -> CubicBSpline:
 
 def test_an_unproven_start_is_never_returned(default_cell, corridor):
     """A start through a wall: only proven curves come back, or none at all."""
-    model = default_cell.clearance_model
+    model = default_cell.motion_model
     start = _colliding(default_cell, corridor)
-    assert not prove(start, model, default_cell.robot.lipschitz).certified
+    assert not prove(start, model, model.lipschitz).certified
     late = optimise_shape(start, default_cell, deadline=time.monotonic() - 1.0, proven=False)
     assert late.trajectory is None and not late.improved  # no time: nothing proven
     shaped = optimise_shape(start, default_cell, proven=False)
     assert shaped.trajectory is None or (
-        shaped.improved and prove(shaped.trajectory, model,
-                                  default_cell.robot.lipschitz).certified)
+        shaped.improved and prove(shaped.trajectory, model, model.lipschitz).certified)
 
 
 def test_from_an_unproven_start_a_failed_solve_ends_the_optimisation(default_cell, corridor,
@@ -278,7 +277,7 @@ def test_the_fine_stage_never_returns_a_slower_curve_than_the_coarse_one(
     planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
     made = []
     monkeypatch.setattr(methods.KnotTiming, 'finish', lambda *a, **k: made.append(a))
-    result = planner.plan('loadport1', 'loadlock2')
+    result = planner.plan('loadport3', 'loadlock1')
     assert result.cycle_time <= result.metrics['coarse_cycle_time']
     assert result.verification.ok and not result.warnings
     assert made == []  # the corridor curve is made only when it is needed

@@ -25,8 +25,9 @@ MARGIN = TimingSettings().margin
 PEAK_BETWEEN_SAMPLES = (
     np.array([-1.1700711684872604, 2.423652420735181, 1.3388026000994313]),
     np.array([-1.7122484869689896, -2.949758921692892, -2.7240628830999567]))
-"""A free joint pair of the default cell whose λ-scaled start (λ = 34) exceeded the wafer
-limit by 0.02 % between the instants its λ was taken from, 34 ms apart once scaled."""
+"""A free joint pair of the default cell whose λ-scaled start (λ = 34; 25 since the cell has
+port pockets) exceeded the wafer limit by 0.02 % between the instants its λ was taken from,
+34 ms apart once scaled."""
 
 
 @pytest.fixture()
@@ -68,10 +69,10 @@ def test_ends_are_exact_and_at_rest(spline):
 
 
 def _station_corridor(cell, roadmap, start, goal):
-    model = cell.clearance_model
-    path = find_path(roadmap, model, cell.robot.lipschitz, cell.stations[start].configs[0].q,
+    model = cell.motion_model
+    path = find_path(roadmap, model, model.lipschitz, cell.stations[start].configs[0].q,
                      cell.stations[goal].configs[0].q).path
-    return build_corridor(path, model.body_clearance(path), cell.robot.lipschitz)
+    return build_corridor(path, model.body_clearance(path), model.lipschitz)
 
 
 def test_peak_speed_is_the_exact_maximum_on_each_piece(spline):
@@ -193,7 +194,8 @@ def test_a_timing_stopped_at_its_deadline_meets_every_limit(monkeypatch, default
 
 def _planner_corridor(cell, roadmap, start, goal):
     """Return the corridor the planner builds between two configurations (its defaults)."""
-    model, lipschitz = cell.clearance_model, cell.robot.lipschitz
+    model = cell.motion_model
+    lipschitz = model.lipschitz
     path = shortcut(simplify(find_path(roadmap, model, lipschitz, start, goal).path), model,
                     lipschitz)
     return build_corridor(path, model.body_clearance(path), lipschitz)
@@ -205,7 +207,7 @@ def test_the_lambda_scaled_start_meets_every_limit_where_verification_checks(
     corridor = _planner_corridor(default_cell, default_roadmap, start, goal)
     problem = TimingProblem(corridor.control_points, default_cell.robot)
     intervals, scale = scaled_start(problem)
-    assert scale > 30.0
+    assert scale > 20.0
     checked = verify(CubicBSpline.from_intervals(problem.points, intervals), default_cell,
                      start, goal)
     assert checked.ok, checked.problems

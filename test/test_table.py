@@ -286,7 +286,7 @@ def test_a_retaught_station_replans_only_its_own_pairs(default_cell, tmp_path, m
     first = Planner(default_cell, load_or_build(default_cell, cache_dir=cache).roadmap)
     build_and_store_table(first, cache)
     text = default_cell_path().read_text().replace(
-        'loadport2: {wafer_center: [0.0, 0.26]', 'loadport2: {wafer_center: [0.03, 0.26]')
+        'loadport2: {wafer_center: [0.0, 0.26]', 'loadport2: {wafer_center: [0.005, 0.26]')
     (tmp_path / 'cell.yaml').write_text(text)
     moved = Cell.from_yaml(tmp_path / 'cell.yaml')
     assert moved.digest != default_cell.digest

@@ -275,7 +275,8 @@ class Planner:
 
     def _prepared(self, a, b, qa, qb, branches, stage_ms) -> '_Prepared':
         """Return the path, corridor and the method's draft between two configurations."""
-        model, lipschitz = self.cell.clearance_model, self.cell.robot.lipschitz
+        model = self.cell.motion_model  # the port margins too: the corridor keeps them
+        lipschitz = model.lipschitz
         route = find_path(self.roadmap, model, lipschitz, qa, qb)
         stage_ms['connect'] += route.connect_ms
         stage_ms['search'] += route.search_ms

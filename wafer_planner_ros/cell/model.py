@@ -23,6 +23,7 @@ from wafer_planner_ros.cell.stations import read_stations, Station
 from wafer_planner_ros.errors import CellError
 from wafer_planner_ros.geometry.clearance import ClearanceModel
 from wafer_planner_ros.geometry.polygons import PolygonError, simple_polygon, touches_or_overlaps
+from wafer_planner_ros.geometry.ports import PortedModel, PortModel
 
 _PACKAGE = Path(__file__).resolve().parents[1]  # wafer_planner_ros/
 
@@ -96,6 +97,17 @@ class Cell:
     def clearance_model(self) -> ClearanceModel:
         """Return the vectorised collision/clearance model of this cell."""
         return _clearance_model(self.robot, self.boundary, self.obstacles)
+
+    @functools.cached_property
+    def port_model(self) -> PortModel:
+        """Return the port margins of every station with a port (``geometry.ports``)."""
+        return PortModel(self.robot.arm, [s.port for _, s in sorted(self.stations.items())
+                                          if s.port is not None])
+
+    @functools.cached_property
+    def motion_model(self) -> PortedModel:
+        """Return the clearance model with the port margins: what a motion must keep > 0."""
+        return PortedModel(self.clearance_model, self.port_model, self.robot.lipschitz)
 
     def fcl_model(self):
         """Return a new reference collision model on python-fcl (margin included)."""

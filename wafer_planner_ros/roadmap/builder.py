@@ -57,8 +57,9 @@ class _UnionFind:
 
 class _Builder:
     def __init__(self, cell, settings: RoadmapSettings, rng):
-        self.model = cell.clearance_model
-        self.lipschitz = cell.robot.lipschitz
+        # The bodies' clearances and the port margins: no node or edge inside a port.
+        self.model = cell.motion_model
+        self.lipschitz = self.model.lipschitz
         self.settings = settings
         self.rng = rng
         lower, upper = cell.robot.limits.position.T

@@ -1,7 +1,10 @@
 """
-Roadmap cache: one ``.npz`` file per (canonical cell, settings, seed, package version).
+Roadmap cache: one ``.npz`` file per cell, settings, seed, version and bodies.
 
-The key is the SHA-256 of those four; the file name holds its first 16 hex digits and the
+The cell is canonical; the bodies are the robot's and the port margins
+(``Cell.motion_model``), whose clearances the nodes store.
+
+The key is the SHA-256 of those five; the file name holds its first 16 hex digits and the
 file stores the whole key, the cell's digest and the roadmap's content digest. On load the
 key and the content digest are checked; a file that is stale (other settings, seed or
 version), from another cell, truncated or garbage is reported and rebuilt, never trusted.
@@ -67,8 +70,10 @@ class CachedRoadmap:
 
 def cache_key(cell, settings: RoadmapSettings, seed: int) -> str:
     """Return the cache key of a roadmap (hex SHA-256)."""
+    # The bodies (and port margins) whose clearances its nodes store and its edges keep.
     text = json.dumps({'cell': cell.digest, 'settings': asdict(settings), 'seed': seed,
-                       'version': __version__}, sort_keys=True)
+                       'version': __version__, 'bodies': list(cell.motion_model.body_names)},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
 

@@ -10,7 +10,9 @@ time, scaled by L_k, to one end than that end's clearance. A piece whose test fa
 some body is split at its middle time and both halves are tested; a middle in collision
 refutes the curve. A piece still open after ``max_depth`` splits (the curve grazes an
 obstacle within nanometres) is left unproven: the answer errs only towards "not proven".
-The model's bodies are grown by the cell's clearance margin, so a proof keeps the margin.
+The model's bodies are grown by the cell's clearance margin, so a proof keeps the margin;
+the cell's ``motion_model`` adds its port margins as bodies, so a proof in it also shows
+that the wafer keeps every port's tolerances (``geometry.ports``).
 The pieces cover all of [0, T] (``Trajectory.covering_breaks``), whatever the curve's own
 breaks: whatever is evaluated there is proven. All pieces are tested together: one
 vectorised clearance call per bisection level.
@@ -40,6 +42,8 @@ class CurveProof:
     """Configurations whose clearance was computed."""
     collision: Optional[float] = None
     """s: a time at which the curve is in collision (it refutes the curve), if one was met."""
+    body: Optional[int] = None
+    """The model's body (its column) found in collision then."""
     unproven: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     """(K, 2) start and end times of the pieces left unproven or refuted."""
 
@@ -54,7 +58,7 @@ def prove(trajectory: Trajectory, model, lipschitz: np.ndarray,
     hit = np.nonzero(np.any(clearance <= 0.0, axis=1))[0]
     if len(hit):
         return CurveProof(False, 0, 0, evaluations, float(breaks[hit[0]]),
-                          np.stack([a, b], axis=1))
+                          _first(clearance[hit[0]]), np.stack([a, b], axis=1))
     pieces, depth = 0, 0
     for level in range(max_depth + 1):
         reach = (trajectory.peak_speed(a, b) * (b - a)[:, None]) @ lipschitz.T   # (K, B)
@@ -71,7 +75,13 @@ def prove(trajectory: Trajectory, model, lipschitz: np.ndarray,
         hit = np.nonzero(np.any(dm <= 0.0, axis=1))[0]
         if len(hit):
             return CurveProof(False, pieces, depth, evaluations, float(middle[hit[0]]),
-                              np.stack([a[hit], b[hit]], axis=1))
+                              _first(dm[hit[0]]), np.stack([a[hit], b[hit]], axis=1))
         a, b = np.concatenate([a, middle]), np.concatenate([middle, b])
         da, db = np.concatenate([da, dm]), np.concatenate([dm, db])
-    return CurveProof(not len(a), pieces, depth, evaluations, None, np.stack([a, b], axis=1))
+    return CurveProof(not len(a), pieces, depth, evaluations, None, None,
+                      np.stack([a, b], axis=1))
+
+
+def _first(clearance: np.ndarray) -> int:
+    """Return the first body whose clearance is not positive (NaN counts)."""
+    return int(np.argmax(~(clearance > 0.0)))

@@ -13,7 +13,8 @@ total time. Constraints:
   resampling loop of ``timing.optimise``;
 - clearance at samples: every body nearer than ``ShapeSettings.watch`` keeps at least
   ``ShapeSettings.clearance`` (less where the start curve itself is closer, so that the
-  start stays feasible).
+  start stays feasible); the port margins (``geometry.ports``) the same way, as bodies of
+  the cell's ``motion_model``, which the proof uses too.
 
 The start meets every limit: the corridor curve (also proven: inside its boxes, λ-scaled
 to every limit) or a curve fitted to the corridor (``coarse``: not proven, so never
@@ -47,6 +48,8 @@ from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
 logger = logging.getLogger(__name__)
 
+FAILED_SLOWER = 100.0
+"""An answer this many times slower than the start is a failed solve, not a curve."""
 POSITION_MARGIN = 1e-6
 """rad: free control points stay this far inside the position limits, so that rounding
 in evaluating the curve never puts it beyond a limit (a point on the limit did, by 1e-16)."""
@@ -111,6 +114,12 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
         if not (np.all(np.isfinite(points)) and np.all(np.isfinite(intervals))):
             message = f'solver failed: {result.message}'
             break
+        if intervals.sum() > FAILED_SLOWER * problem.start.duration:
+            # A failed solve can end anywhere: 11,712,504 s from a 5 s start once, whose
+            # dense check alone would have taken 87 GiB.
+            message = (f'solver failed: {result.message} (its answer takes '
+                       f'{intervals.sum():.4g} s)')
+            break
         if give_up_above is not None and result.converged and \
                 intervals.sum() > (1.0 + timing.give_up_margin) * give_up_above:
             logger.debug('shape round %d: T = %.4f s cannot beat %.4f s', rounds,
@@ -133,7 +142,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
                 scaled = limits.meet_limits(scaled)[0]
             curve = CubicBSpline.from_intervals(points, scaled)
         with timed('optimise.proof'):
-            proof = prove(curve, problem.model, cell.robot.lipschitz)
+            proof = prove(curve, problem.model, problem.model.lipschitz)
         logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '
                      'proven %s, min span %.4f s', rounds, result.message, result.nit,
                      curve.duration, rescale, ratio.max(), proof.certified, intervals.min())
@@ -182,15 +191,20 @@ def _clearance_samples(problem: ShapeProblem, span, fraction,
 
     ``kept``: the clearance a body keeps there, ``ShapeSettings.clearance`` or, where the
     start curve is closer, half of the start's (where an unproven start touches a wall,
-    ``ShapeSettings.clearance``).
+    ``ShapeSettings.clearance``); for a port margin ``ShapeSettings.port_kept`` of the
+    port's lateral tolerance in place of ``ShapeSettings.clearance`` (a margin is at most
+    the tolerance).
     """
     span, fraction = np.asarray(span, np.int64), np.asarray(fraction, float)
-    start = problem.clearances(problem.start, span, fraction)               # (K, 4)
+    start = problem.clearances(problem.start, span, fraction)          # (K, 4 + 2P)
     near = start < problem.settings.watch
     if every_body:
         near[:] = True
     k, body = np.nonzero(near)
-    wanted, start = problem.settings.clearance, start[k, body]
+    model = problem.model
+    wanted = np.concatenate([np.full(model.bodies, problem.settings.clearance),
+                             problem.settings.port_kept * model.tolerances])[body]
+    start = start[k, body]
     kept = np.where(start > 0.0, np.minimum(wanted, 0.5 * start), wanted)
     return span[k], fraction[k], body, kept
 

@@ -4,7 +4,8 @@ The whole-curve optimisation problem of one start curve: variables, rows and Jac
 Variables (``pack``): every control point but the three at each end (the complete stops)
 and every span duration, relative to the start's. Rows g >= 0 (``solver_rows``): the
 velocity, acceleration (and jerk) control points, the wafer-centre acceleration at samples
-and the clearance of a body at samples, all with exact Jacobians (compiled: ``rows``;
+and the clearance of a body (or a port margin: the cell's ``motion_model``) at samples,
+all with exact Jacobians (compiled: ``rows``;
 clearance from the closest points and the body Jacobian). ``shape.optimise_shape`` solves
 it.
 """
@@ -47,7 +48,7 @@ class ShapeProblem:
                  timing: TimingSettings):
         """Refine the start curve's knots and set up the problem for ``cell``'s robot."""
         self.cell, self.settings, self.timing = cell, shape, timing
-        self.robot, self.model = cell.robot, cell.clearance_model
+        self.robot, self.model = cell.robot, cell.motion_model
         self.start = refine(start, shape.min_spans)
         self.count = len(self.start.control_points)
         self.spans = self.count - DEGREE
@@ -123,6 +124,6 @@ class ShapeProblem:
         return values, jacobian
 
     def clearances(self, curve: CubicBSpline, span, fraction) -> np.ndarray:
-        """Return every body's clearance (K, 4) at (span, fraction) samples of a curve."""
+        """Return every body's clearance and port margin (K, 4 + 2P) at samples of a curve."""
         times = curve.breaks()[span] + curve.intervals[span] * fraction
         return self.model.body_clearance(curve.evaluate(times))

@@ -72,6 +72,9 @@ class ShapeSettings:
     clearance: float = 0.002
     """m: what every body keeps from the walls at the samples (the proof then covers the
     curve between them)."""
+    port_kept: float = 0.25
+    """The share of a port's lateral tolerance its margins keep at the samples (the proof
+    then covers the curve between them; ``geometry.ports``)."""
     watch: float = 0.05
     """m: bodies this near a wall at a sample have their clearance constrained there."""
     max_rounds: int = 6

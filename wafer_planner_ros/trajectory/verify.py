@@ -3,8 +3,11 @@ Verification of a trajectory before it leaves the planner, whatever made it.
 
 First the curve must be well formed (``Trajectory.ill_formed``: finite, consistent data,
 exactly at the start and goal and at rest there); an ill-formed one fails at once and is
-evaluated no further. Then it must be proven collision-free (``proof.prove``: no sampling
-step) over all of [0, T]. As a second, independent line, limits are checked every
+evaluated no further. Then it must be proven collision-free and within every port's
+tolerances (``proof.prove`` in the cell's ``motion_model``: no sampling step) over all of
+[0, T]. As a second, independent line, limits and the port tolerances (the wafer's offset
+from a port's axis and the blade's angle from its heading while the wafer is inside it,
+``geometry.ports``) are checked every
 ``LIMIT_STEP`` seconds from 0 to T and collisions at configurations no more than
 ``COLLISION_STEP`` rad apart in any joint, from 0 to T: on each eighth of a piece
 (``Trajectory.pieces``) the time step between collision checks is ``COLLISION_STEP`` over
@@ -18,6 +21,7 @@ from typing import Mapping, Optional, Tuple
 
 import numpy as np
 
+from wafer_planner_ros.geometry.ports import describe_deviation
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.proof import CurveProof, DEFAULT_MAX_DEPTH, prove
 
@@ -40,6 +44,10 @@ class Verification:
     """Largest |jerk| of each joint (rad/s^3)."""
     peak_wafer_jerk: float = 0.0
     """Largest |jerk| of the wafer centre (m/s^3), what makes a wafer slide."""
+    port_ratios: Mapping[str, float] = field(default_factory=dict)
+    """While the wafer is inside a port, its largest offset from the axis ('lateral') and
+    angle from the heading ('heading') over the port's tolerance (<= 1 passes; 0 when the
+    wafer never enters a port)."""
     limit_samples: int = 0
     collision_samples: int = 0
     proof: Optional[CurveProof] = None
@@ -75,11 +83,18 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
     ends = np.abs(np.concatenate([qd[[0, -1]], qdd[[0, -1]]])).max()
     if ends > END_TOLERANCE:
         problems.append(f'velocity or acceleration at an end is {ends:.3g}, not zero')
-    proof = prove(trajectory, cell.clearance_model, robot.lipschitz)
+    port_ratios, breach = port_deviation(cell.port_model, q)
+    problems += [f'the wafer inside a port reaches {ratio:.4f} x its {name} tolerance'
+                 f'{breach}' for name, ratio in port_ratios.items() if not ratio <= 1.0]
+    motion = cell.motion_model
+    proof = prove(trajectory, motion, motion.lipschitz)
     if not proof.certified:
-        problems.append('the curve is not proven collision-free: ' + (
-            f'in collision at t = {proof.collision:.4f} s' if proof.collision is not None
-            else f'{len(proof.unproven)} pieces still open after {DEFAULT_MAX_DEPTH} splits'))
+        problems.append("the curve is not proven collision-free and within the ports' "
+                        'tolerances: ' + (
+                            f'{motion.body_names[proof.body]} at t = {proof.collision:.4f} s'
+                            if proof.collision is not None else
+                            f'{len(proof.unproven)} pieces still open after '
+                            f'{DEFAULT_MAX_DEPTH} splits'))
     # The model's bodies are grown by the clearance margin: <= 0 is closer than the margin.
     clearance, checks = dense_clearance(trajectory, cell.clearance_model)
     distance = clearance + robot.clearance_margin
@@ -90,8 +105,29 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
     return Verification(problems=tuple(problems), ratios=ratios, min_clearance=distance,
                         peak_jerk=tuple(np.abs(qddd).max(axis=0).tolist()),
                         peak_wafer_jerk=float(np.hypot(*robot.arm.wafer_jerk(
-                            q, qd, qdd, qddd).T).max()),
+                            q, qd, qdd, qddd).T).max()), port_ratios=port_ratios,
                         limit_samples=len(t), collision_samples=checks, proof=proof)
+
+
+def port_deviation(model, q: np.ndarray) -> tuple:
+    """
+    Return ({'lateral': ratio, 'heading': ratio}, how the worst breaks a rule or '').
+
+    Each ratio: the largest offset from a port's axis (angle from its heading) of the
+    configurations ``q`` whose wafer is inside that port, over its tolerance; 0 when none is.
+    """
+    where, offset, turn = model.deviation(q)
+    lateral, heading = np.zeros(len(q)), np.zeros(len(q))
+    for k, port in enumerate(model.ports):
+        at = where == k
+        lateral[at] = offset[at] / port.lateral_tolerance
+        heading[at] = turn[at] / port.heading_tolerance
+    if not len(q):
+        return {'lateral': 0.0, 'heading': 0.0}, ''
+    ratios = {'lateral': float(lateral.max()), 'heading': float(heading.max())}
+    worst = int(np.argmax(np.fmax(lateral, heading)))
+    told = describe_deviation(model, q[worst:worst + 1])
+    return ratios, '' if told is None else f' ({told})'
 
 
 def _ratio(values: np.ndarray, limit) -> float:

@@ -1,0 +1,287 @@
+"""
+Ports: the straight channel from a station's retracted pose to its pick/place pose.
+
+A port lies along the station's heading: the pick/place pose is ``depth`` beyond the
+retracted pose (the wafer centre moved by ``depth`` along the heading, the heading kept).
+With ``s`` the wafer centre's distance past the retracted pose along the port's axis and
+``y`` its offset from the axis, the wafer is **inside** the port where ``s > |y|``: a
+wafer on its way in is inside once it has passed the retracted pose, one that sweeps past
+the port's mouth (|y| larger than how far it is past the retracted pose) is not, nor one
+that turns at the retracted pose itself. While it is inside, its centre must stay within
+``lateral_tolerance`` of the axis and the blade within ``heading_tolerance`` of the
+heading: so it enters and leaves the port straight and aligned.
+
+That rule is two margins per port (``PortModel.margins``), each positive exactly where the
+rule holds, in metres, so that the proof and the optimiser treat them as they treat a
+body's clearance. With ``dh`` the blade's angle from the heading (wrapped into (-pi, pi])
+and ``tol`` the lateral tolerance:
+
+- outside = (|y| - s) / sqrt(2): positive where the wafer is not inside;
+- lateral = max(outside, lateral_tolerance - |y|);
+- heading = max(outside, R (heading_tolerance - |dh|)), R = lateral_tolerance /
+  heading_tolerance (metres per radian, so that both margins top out at the lateral
+  tolerance).
+
+Both are 1-Lipschitz in the wafer centre's position and the heading one is R-Lipschitz in
+the heading, so turning joint i by dq changes them by at most ``PortModel.lipschitz[.., i]
+|dq|`` (the distance from joint i's axis to the wafer centre, or R if larger: the heading
+moves by dq itself).
+"""
+
+from dataclasses import dataclass
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+DEFAULT_LATERAL_TOLERANCE = 0.001
+"""m: how far off the port's axis the wafer centre may be while inside, by default."""
+DEFAULT_HEADING_TOLERANCE = 0.0087
+"""rad: how far the blade may turn from the port's heading while inside, by default (0.5 deg)."""
+CHANNEL_STEP = 0.02
+"""m: the spacing of the configurations along a port's channel first checked (halved where
+the clearance there does not cover the motion between them)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Port:
+    """The port of one station (see the module)."""
+
+    station: str
+    retracted: np.ndarray
+    """(2,) the wafer centre at the retracted pose (m)."""
+    heading: float
+    """rad: the blade heading in and out of the port, along its axis."""
+    depth: float
+    """m: how far beyond the retracted pose the pick/place pose lies."""
+    lateral_tolerance: float = DEFAULT_LATERAL_TOLERANCE
+    heading_tolerance: float = DEFAULT_HEADING_TOLERANCE
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Return the unit vector along the heading, into the port."""
+        return np.array([np.cos(self.heading), np.sin(self.heading)])
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Return the unit vector to the left of the axis."""
+        return np.array([-np.sin(self.heading), np.cos(self.heading)])
+
+    @property
+    def inside_center(self) -> np.ndarray:
+        """Return the wafer centre at the pick/place pose (m)."""
+        return self.retracted + self.depth * self.axis
+
+    @property
+    def heading_scale(self) -> float:
+        """Return R (m/rad): the heading margin's metres per radian."""
+        return self.lateral_tolerance / self.heading_tolerance
+
+    def offsets(self, centers: np.ndarray) -> tuple:
+        """Return (s, y): the distance past the retracted pose and the offset from the axis."""
+        d = np.asarray(centers, float) - self.retracted
+        (ux, uy), (nx, ny) = self.axis, self.normal
+        # Elementwise, not a matrix product: the same rounding however many at once.
+        return d[..., 0] * ux + d[..., 1] * uy, d[..., 0] * nx + d[..., 1] * ny
+
+    def channel(self, arm, start_q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """
+        Return the configurations (K, 3) placing the wafer ``s`` (K,) m into the port.
+
+        ``start_q`` is the retracted pose on one elbow branch and ``s`` ascends from 0: each
+        configuration places the wafer centre on the axis with the port's heading, on the
+        same branch, every angle continued from ``start_q`` (no wrap by 2 pi); at s = 0
+        exactly ``start_q``. NaN where the arm cannot reach.
+        """
+        start_q = np.asarray(start_q, float)
+        q = self.configurations(arm, s, start_q[1])
+        q = np.unwrap(q, axis=0)
+        q += 2.0 * np.pi * np.round((start_q - q[0]) / (2.0 * np.pi))
+        q[np.asarray(s) == 0.0] = start_q  # the station's configuration, not its rounding
+        return q
+
+    def configurations(self, arm, s: np.ndarray, elbow: float, near=None) -> np.ndarray:
+        """
+        Return the configurations placing the wafer ``s`` m into the port on a branch.
+
+        ``elbow``: the sign of q2 of the branch. ``near`` (K, 3): each angle is shifted by
+        a multiple of 2 pi to the nearest to it. NaN where the arm cannot reach.
+        """
+        centers = self.retracted + np.asarray(s, float)[:, None] * self.axis
+        q = inverse_on_branch(arm, centers, self.heading, 1 if elbow >= 0.0 else -1)
+        if near is not None:
+            q += 2.0 * np.pi * np.round((np.asarray(near, float) - q) / (2.0 * np.pi))
+        return q
+
+
+def inverse_on_branch(arm, centers: np.ndarray, heading: float, elbow: int) -> np.ndarray:
+    """Return the (K, 3) configurations placing the wafer at ``centers`` (NaN: out of reach)."""
+    l1, l2, l3 = arm.link_lengths
+    wrist = np.asarray(centers, float) - l3 * np.array([np.cos(heading), np.sin(heading)])
+    d = wrist - arm.base
+    cos_q2 = (np.sum(d * d, axis=1) - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
+    with np.errstate(invalid='ignore'):
+        q2 = elbow * np.arccos(np.where(np.abs(cos_q2) <= 1.0, cos_q2, np.nan))
+    q1 = np.arctan2(d[:, 1], d[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+    return np.stack([q1, q2, heading - q1 - q2], axis=1)
+
+
+class PortModel:
+    """The port margins of every port of a cell (see the module): two per port."""
+
+    def __init__(self, arm, ports: Sequence[Port]):
+        """Keep the arm and the ports; a cell without ports has no margins at all."""
+        self.arm = arm
+        self.ports: Tuple[Port, ...] = tuple(ports)
+        reach = np.cumsum(np.asarray(arm.link_lengths, float)[::-1])[::-1]   # (3,)
+        rows = []
+        for port in self.ports:
+            rows += [reach, np.maximum(reach, port.heading_scale)]
+        self.lipschitz = np.array(rows).reshape(-1, 3)
+        """(2P, 3) m/rad: the bound on each margin's change per radian of each joint."""
+        self.names = tuple(f'{p.station} port {kind}' for p in self.ports
+                           for kind in ('lateral', 'heading'))
+        self.tolerances = np.repeat([p.lateral_tolerance for p in self.ports], 2)
+        """(2P,) m: the largest value of each margin (the port's lateral tolerance)."""
+
+    def __len__(self) -> int:
+        """Return the number of margins (two per port)."""
+        return 2 * len(self.ports)
+
+    def margins(self, q: np.ndarray) -> np.ndarray:
+        """Return each configuration's margins, (N, 2P) for (N, 3): <= 0 breaks the rule (m)."""
+        return self._margins(q, False)[0]
+
+    def margins_gradient(self, q: np.ndarray) -> tuple:
+        """
+        Return the margins (N, 2P) and their gradient d margin / d q (N, 2P, 3).
+
+        The gradient of the larger term of each max (the outside term where they tie); of
+        |y| and |dh| the one-sided gradient on the positive side at zero.
+        """
+        return self._margins(q, True)
+
+    def inside(self, q: np.ndarray) -> np.ndarray:
+        """Return the index of the port the wafer is inside for each configuration, or -1."""
+        q = np.atleast_2d(np.asarray(q, float))
+        where = np.full(len(q), -1)
+        centers = self.arm.wafer_center(q)
+        for k, port in enumerate(self.ports):
+            s, y = port.offsets(centers)
+            where[(where < 0) & (s > np.abs(y))] = k
+        return where
+
+    def deviation(self, q: np.ndarray) -> tuple:
+        """Return (port index or -1, |offset| (m), |heading error| (rad)) of each config."""
+        q = np.atleast_2d(np.asarray(q, float))
+        where = self.inside(q)
+        centers, heading = self.arm.wafer_center(q), self.arm.heading(q)
+        offset, turn = np.zeros(len(q)), np.zeros(len(q))
+        for k, port in enumerate(self.ports):
+            at = where == k
+            offset[at] = np.abs(port.offsets(centers[at])[1])
+            turn[at] = np.abs(_wrapped(heading[at] - port.heading))
+        return where, offset, turn
+
+    def _margins(self, q, gradients: bool) -> tuple:
+        q = np.atleast_2d(np.asarray(q, float)).reshape(-1, 3)
+        n = len(q)
+        values = np.empty((n, len(self)))
+        grad = np.zeros((n, len(self), 3)) if gradients else None
+        if not self.ports:
+            return values, grad
+        centers, heading = self.arm.wafer_center(q), self.arm.heading(q)
+        jac = self.arm.jacobian(q) if gradients else None                 # (N, 2, 3)
+        for k, port in enumerate(self.ports):
+            s, y = port.offsets(centers)
+            side = np.where(y >= 0.0, 1.0, -1.0)
+            dh = _wrapped(heading - port.heading)
+            turn = np.where(dh >= 0.0, 1.0, -1.0)
+            outside = (np.abs(y) - s) / np.sqrt(2.0)
+            lateral = port.lateral_tolerance - np.abs(y)
+            aligned = port.heading_scale * (port.heading_tolerance - np.abs(dh))
+            values[:, 2 * k] = np.maximum(outside, lateral)
+            values[:, 2 * k + 1] = np.maximum(outside, aligned)
+            if not gradients:
+                continue
+            along = np.einsum('i,nij->nj', port.axis, jac)                  # ds/dq
+            across = np.einsum('i,nij->nj', port.normal, jac)               # dy/dq
+            d_outside = (side[:, None] * across - along) / np.sqrt(2.0)
+            grad[:, 2 * k] = np.where((outside >= lateral)[:, None], d_outside,
+                                      -side[:, None] * across)
+            grad[:, 2 * k + 1] = np.where((outside >= aligned)[:, None], d_outside,
+                                          -port.heading_scale * turn[:, None])
+        # A configuration that is not finite is nowhere: as in the clearance model.
+        finite = np.isfinite(q).all(axis=1)
+        values[~finite] = -np.inf
+        if gradients:
+            grad[~finite] = 0.0
+        return values, grad
+
+
+class PortedModel:
+    """
+    A cell's clearance model with its port margins as further bodies: what a motion keeps > 0.
+
+    ``body_clearance`` is the clearance model's (links, wafer) then the port margins
+    (``PortModel``), with ``lipschitz`` the rows of both: the proof, and the whole-curve
+    optimiser's clearance rows, hold a curve to the port rules as they hold it clear of the
+    walls; so do the roadmap's nodes and edges and the corridor's boxes and segments (a
+    box near a port is sized by how far the wafer is from entering it).
+    """
+
+    def __init__(self, clearance_model, port_model: PortModel, body_lipschitz: np.ndarray):
+        """Join a clearance model (bodies' Lipschitz rows ``body_lipschitz``) and a port model."""
+        self.clearance_model, self.port_model = clearance_model, port_model
+        self.lipschitz = np.vstack([body_lipschitz, port_model.lipschitz])
+        self.body_names = tuple(clearance_model.body_names) + port_model.names
+        self.bodies = clearance_model.body_count
+        """The first this many columns are the robot's bodies; the rest port margins."""
+        self.body_count = self.bodies + len(port_model)
+        self.tolerances = port_model.tolerances
+        """(2P,) m: the largest value of each port margin."""
+
+    def body_clearance(self, q: np.ndarray) -> np.ndarray:
+        """Return every body's clearance then every port margin (N, 4 + 2P), in m."""
+        q = np.atleast_2d(np.asarray(q, float))
+        bodies = self.clearance_model.body_clearance(q)
+        if not len(self.port_model):
+            return bodies
+        return np.concatenate([bodies, self.port_model.margins(q)], axis=1)
+
+    def body_clearance_gradient(self, q: np.ndarray) -> tuple:
+        """Return ``body_clearance`` and its gradient by q (N, 4 + 2P, 3)."""
+        q = np.atleast_2d(np.asarray(q, float))
+        bodies, gradient = self.clearance_model.body_clearance_gradient(q)
+        if not len(self.port_model):
+            return bodies, gradient
+        margins, by_q = self.port_model.margins_gradient(q)
+        return (np.concatenate([bodies, margins], axis=1),
+                np.concatenate([gradient, by_q], axis=1))
+
+    def clearance(self, q: np.ndarray) -> np.ndarray:
+        """Return the smallest of ``body_clearance`` per configuration (N,)."""
+        return self.body_clearance(q).min(axis=-1)
+
+
+def _wrapped(angle) -> np.ndarray:
+    """Return angles wrapped into (-pi, pi]."""
+    return -((np.pi - np.asarray(angle, float)) % (2.0 * np.pi) - np.pi)
+
+
+def describe_deviation(model: PortModel, q: np.ndarray) -> Optional[str]:
+    """Return how a configuration breaks a port's tolerances, or None if it does not."""
+    where, offset, turn = model.deviation(q)
+    k = int(where[0])
+    if k < 0:
+        return None
+    port = model.ports[k]
+    problems = []
+    if not offset[0] <= port.lateral_tolerance:
+        problems.append(f'{offset[0] * 1000:.2f} mm off its axis (tolerance '
+                        f'{port.lateral_tolerance * 1000:.2f} mm)')
+    if not turn[0] <= port.heading_tolerance:
+        problems.append(f'turned {np.degrees(turn[0]):.2f} deg from its heading (tolerance '
+                        f'{np.degrees(port.heading_tolerance):.2f} deg)')
+    if not problems:
+        return None
+    return f'the wafer is inside the port of {port.station} ' + ' and '.join(problems)
