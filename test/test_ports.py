@@ -66,7 +66,7 @@ def test_port_tolerances_have_defaults_and_are_part_of_the_cell(document):
     c = Cell.from_dict(document)
     assert c.stations['loadlock1'].port is None and c.stations['loadlock1'].inside == ()
     assert 'port' not in c.stations['loadlock1'].spec
-    assert len(c.port_model) == 8
+    assert len(c.port_model) == 16  # four margins of each of the four ports left
 
 
 @pytest.mark.parametrize('port, path, reason', [
@@ -111,22 +111,22 @@ def _at(cell, station, s, offset=0.0, turn=0.0, elbow=1):
 def test_the_margins_are_positive_exactly_where_the_rule_holds(default_cell):
     model = default_cell.port_model
     k = [p.station for p in model.ports].index('loadport2')
-    cases = [  # (s, offset, turn, lateral margin, heading margin) by hand
-        (0.35, 0.0, 0.0, 0.001, 0.001),          # at the inside pose: the full tolerances
-        (0.2, 0.0005, 0.0, 0.0005, 0.001),
-        (0.2, -0.002, 0.0, -0.001, 0.001),       # 2 mm off the axis inside: broken
-        (0.2, 0.0, 0.0174, 0.001, -0.001),       # turned 1 deg inside: broken
-        (-0.03, 0.01, 0.1, 0.04 / 2 ** 0.5, 0.04 / 2 ** 0.5),      # in front of the port
-        (0.005, 0.16, 0.3, 0.155 / 2 ** 0.5, 0.155 / 2 ** 0.5),    # sweeping past its mouth
-        (0.005, 0.003, 0.0, -0.002 / 2 ** 0.5, 0.001),   # entering 3 mm off the axis
+    out = 2 ** -0.5
+    cases = [  # (s, offset, turn, margins: left, right, turned left, turned right) by hand
+        (0.35, 0.0, 0.0, (0.001, 0.001, 0.001, 0.001)),     # the inside pose: full tolerance
+        (0.2, 0.0005, 0.0, (0.0005, 0.0015, 0.001, 0.001)),
+        (0.2, -0.002, 0.0, (0.003, -0.001, 0.001, 0.001)),  # 2 mm off the axis: broken
+        (0.2, 0.0, 0.0174, (0.001, 0.001, -0.001, 0.003)),  # turned 1 deg: broken
+        (-0.03, 0.01, 0.1, (0.04 * out,) * 4),               # in front of the port
+        (0.005, 0.16, 0.3, (0.155 * out, 0.161, 0.155 * out, 0.155 * out)),  # sweeping past
+        (0.005, 0.003, 0.0, (-0.002 * out, 0.004, 0.001, 0.001)),  # entering 3 mm off
     ]
-    for s, offset, turn, lateral, heading in cases:
+    for s, offset, turn, expected in cases:
         q = _at(default_cell, 'loadport2', s, offset, turn)
-        margins = model.margins(q[None])[0, 2 * k:2 * k + 2]
-        np.testing.assert_allclose(margins, [lateral, heading], atol=1e-9,
-                                   err_msg=str((s, offset, turn)))
+        margins = model.margins(q[None])[0, 4 * k:4 * k + 4]
+        np.testing.assert_allclose(margins, expected, atol=1e-9, err_msg=str((s, offset, turn)))
         broken = describe_deviation(model, q)
-        assert (broken is not None) == (min(lateral, heading) < 0.0)
+        assert (broken is not None) == (min(expected) < 0.0)
     assert 'inside the port of loadport2 2.00 mm off its axis (tolerance 1.00 mm)' in \
         describe_deviation(model, _at(default_cell, 'loadport2', 0.2, -0.002))
 

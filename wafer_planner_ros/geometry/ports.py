@@ -11,19 +11,20 @@ that turns at the retracted pose itself. While it is inside, its centre must sta
 ``lateral_tolerance`` of the axis and the blade within ``heading_tolerance`` of the
 heading: so it enters and leaves the port straight and aligned.
 
-That rule is two margins per port (``PortModel.margins``), each positive exactly where the
+That rule is four margins per port (``PortModel.margins``), all positive exactly where the
 rule holds, in metres, so that the proof and the optimiser treat them as they treat a
-body's clearance. With ``dh`` the blade's angle from the heading (wrapped into (-pi, pi])
-and ``tol`` the lateral tolerance:
+body's clearance. With ``dh`` the blade's angle from the heading (wrapped into (-pi, pi]):
 
 - outside = (|y| - s) / sqrt(2): positive where the wafer is not inside;
-- lateral = max(outside, lateral_tolerance - |y|);
-- heading = max(outside, R (heading_tolerance - |dh|)), R = lateral_tolerance /
-  heading_tolerance (metres per radian, so that both margins top out at the lateral
-  tolerance).
+- left, right = max(outside, lateral_tolerance -+ y): the offset on each side;
+- turned left, turned right = max(outside, R (heading_tolerance -+ dh)), R =
+  lateral_tolerance / heading_tolerance (metres per radian, so that every margin tops out
+  at the lateral tolerance).
 
-Both are 1-Lipschitz in the wafer centre's position and the heading one is R-Lipschitz in
-the heading, so turning joint i by dq changes them by at most ``PortModel.lipschitz[.., i]
+One margin per side, not one of |y|: each is smooth where the wafer is inside, which the
+optimiser's linearised rows need (a wafer on the axis sits on the kink of |y|). All are
+1-Lipschitz in the wafer centre's position and the heading ones R-Lipschitz in the
+heading, so turning joint i by dq changes them by at most ``PortModel.lipschitz[.., i]
 |dq|`` (the distance from joint i's axis to the wafer centre, or R if larger: the heading
 moves by dq itself).
 """
@@ -37,6 +38,8 @@ DEFAULT_LATERAL_TOLERANCE = 0.001
 """m: how far off the port's axis the wafer centre may be while inside, by default."""
 DEFAULT_HEADING_TOLERANCE = 0.0087
 """rad: how far the blade may turn from the port's heading while inside, by default (0.5 deg)."""
+MARGINS = ('left', 'right', 'turned left', 'turned right')
+"""The four margins of a port, in their order (see the module)."""
 CHANNEL_STEP = 0.02
 """m: the spacing of the configurations along a port's channel first checked (halved where
 the clearance there does not cover the motion between them)."""
@@ -126,7 +129,7 @@ def inverse_on_branch(arm, centers: np.ndarray, heading: float, elbow: int) -> n
 
 
 class PortModel:
-    """The port margins of every port of a cell (see the module): two per port."""
+    """The port margins of every port of a cell (see the module): four per port."""
 
     def __init__(self, arm, ports: Sequence[Port]):
         """Keep the arm and the ports; a cell without ports has no margins at all."""
@@ -135,28 +138,29 @@ class PortModel:
         reach = np.cumsum(np.asarray(arm.link_lengths, float)[::-1])[::-1]   # (3,)
         rows = []
         for port in self.ports:
-            rows += [reach, np.maximum(reach, port.heading_scale)]
+            turning = np.maximum(reach, port.heading_scale)
+            rows += [reach, reach, turning, turning]
         self.lipschitz = np.array(rows).reshape(-1, 3)
-        """(2P, 3) m/rad: the bound on each margin's change per radian of each joint."""
+        """(4P, 3) m/rad: the bound on each margin's change per radian of each joint."""
         self.names = tuple(f'{p.station} port {kind}' for p in self.ports
-                           for kind in ('lateral', 'heading'))
-        self.tolerances = np.repeat([p.lateral_tolerance for p in self.ports], 2)
-        """(2P,) m: the largest value of each margin (the port's lateral tolerance)."""
+                           for kind in MARGINS)
+        self.tolerances = np.repeat([p.lateral_tolerance for p in self.ports], len(MARGINS))
+        """(4P,) m: the largest value of each margin (the port's lateral tolerance)."""
 
     def __len__(self) -> int:
-        """Return the number of margins (two per port)."""
-        return 2 * len(self.ports)
+        """Return the number of margins (four per port)."""
+        return len(MARGINS) * len(self.ports)
 
     def margins(self, q: np.ndarray) -> np.ndarray:
-        """Return each configuration's margins, (N, 2P) for (N, 3): <= 0 breaks the rule (m)."""
+        """Return each configuration's margins, (N, 4P) for (N, 3): <= 0 breaks the rule (m)."""
         return self._margins(q, False)[0]
 
     def margins_gradient(self, q: np.ndarray) -> tuple:
         """
-        Return the margins (N, 2P) and their gradient d margin / d q (N, 2P, 3).
+        Return the margins (N, 4P) and their gradient d margin / d q (N, 4P, 3).
 
-        The gradient of the larger term of each max (the outside term where they tie); of
-        |y| and |dh| the one-sided gradient on the positive side at zero.
+        The gradient of the larger term of each max (the outside term where they tie; of
+        |y| in it the one on the positive side at zero).
         """
         return self._margins(q, True)
 
@@ -195,21 +199,22 @@ class PortModel:
             s, y = port.offsets(centers)
             side = np.where(y >= 0.0, 1.0, -1.0)
             dh = _wrapped(heading - port.heading)
-            turn = np.where(dh >= 0.0, 1.0, -1.0)
             outside = (np.abs(y) - s) / np.sqrt(2.0)
-            lateral = port.lateral_tolerance - np.abs(y)
-            aligned = port.heading_scale * (port.heading_tolerance - np.abs(dh))
-            values[:, 2 * k] = np.maximum(outside, lateral)
-            values[:, 2 * k + 1] = np.maximum(outside, aligned)
+            tol, scale = port.lateral_tolerance, port.heading_scale
+            terms = (tol - y, tol + y, scale * (port.heading_tolerance - dh),
+                     scale * (port.heading_tolerance + dh))
+            first = len(MARGINS) * k
+            for m, term in enumerate(terms):
+                values[:, first + m] = np.maximum(outside, term)
             if not gradients:
                 continue
             along = np.einsum('i,nij->nj', port.axis, jac)                  # ds/dq
             across = np.einsum('i,nij->nj', port.normal, jac)               # dy/dq
             d_outside = (side[:, None] * across - along) / np.sqrt(2.0)
-            grad[:, 2 * k] = np.where((outside >= lateral)[:, None], d_outside,
-                                      -side[:, None] * across)
-            grad[:, 2 * k + 1] = np.where((outside >= aligned)[:, None], d_outside,
-                                          -port.heading_scale * turn[:, None])
+            turning = np.full_like(across, scale)                            # d(R dh)/dq
+            for m, (term, d_term) in enumerate(zip(terms, (-across, across, -turning,
+                                                           turning))):
+                grad[:, first + m] = np.where((outside >= term)[:, None], d_outside, d_term)
         # A configuration that is not finite is nowhere: as in the clearance model.
         finite = np.isfinite(q).all(axis=1)
         values[~finite] = -np.inf
@@ -238,10 +243,10 @@ class PortedModel:
         """The first this many columns are the robot's bodies; the rest port margins."""
         self.body_count = self.bodies + len(port_model)
         self.tolerances = port_model.tolerances
-        """(2P,) m: the largest value of each port margin."""
+        """(4P,) m: the largest value of each port margin."""
 
     def body_clearance(self, q: np.ndarray) -> np.ndarray:
-        """Return every body's clearance then every port margin (N, 4 + 2P), in m."""
+        """Return every body's clearance then every port margin (N, 4 + 4P), in m."""
         q = np.atleast_2d(np.asarray(q, float))
         bodies = self.clearance_model.body_clearance(q)
         if not len(self.port_model):
@@ -249,7 +254,7 @@ class PortedModel:
         return np.concatenate([bodies, self.port_model.margins(q)], axis=1)
 
     def body_clearance_gradient(self, q: np.ndarray) -> tuple:
-        """Return ``body_clearance`` and its gradient by q (N, 4 + 2P, 3)."""
+        """Return ``body_clearance`` and its gradient by q (N, 4 + 4P, 3)."""
         q = np.atleast_2d(np.asarray(q, float))
         bodies, gradient = self.clearance_model.body_clearance_gradient(q)
         if not len(self.port_model):

@@ -165,7 +165,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             times = np.concatenate([proof.unproven.mean(axis=1), proof.unproven.ravel()])
             if proof.collision is not None:
                 times = np.append(times, proof.collision)
-            more = _clearance_samples(problem, *_at_times(curve, times), every_body=True)
+            more = _clearance_samples(problem, *_at_times(curve, times), every_body=True,
+                                      curve=curve)
             clearance = tuple(np.concatenate([a, b]) for a, b in zip(clearance, more))
         if rescale > 1.0 + timing.rescale_tolerance:
             # Between samples the wafer limit was exceeded: sample the peaks.
@@ -184,10 +185,13 @@ def _inner_limits(robot) -> tuple:
     return lower + POSITION_MARGIN, upper - POSITION_MARGIN
 
 
-def _clearance_samples(problem: ShapeProblem, span, fraction,
-                       every_body: bool = False) -> tuple:
+def _clearance_samples(problem: ShapeProblem, span, fraction, every_body: bool = False,
+                       curve: Optional[CubicBSpline] = None) -> tuple:
     """
     Return (span, fraction, body, kept) rows for the bodies near the walls at samples.
+
+    Near: within ``ShapeSettings.watch`` on the start curve or on ``curve``; with
+    ``every_body`` every body of the robot, and the port margins that are near.
 
     ``kept``: the clearance a body keeps there, ``ShapeSettings.clearance`` or, where the
     start curve is closer, half of the start's (where an unproven start touches a wall,
@@ -196,12 +200,14 @@ def _clearance_samples(problem: ShapeProblem, span, fraction,
     the tolerance).
     """
     span, fraction = np.asarray(span, np.int64), np.asarray(fraction, float)
-    start = problem.clearances(problem.start, span, fraction)          # (K, 4 + 2P)
+    start = problem.clearances(problem.start, span, fraction)          # (K, 4 + 4P)
     near = start < problem.settings.watch
-    if every_body:
-        near[:] = True
-    k, body = np.nonzero(near)
     model = problem.model
+    if every_body:
+        near[:, :model.bodies] = True
+    if curve is not None:
+        near |= problem.clearances(curve, span, fraction) < problem.settings.watch
+    k, body = np.nonzero(near)
     wanted = np.concatenate([np.full(model.bodies, problem.settings.clearance),
                              problem.settings.port_kept * model.tolerances])[body]
     start = start[k, body]
