@@ -64,6 +64,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_optimiser.py --seeds 1 2 3
 	$(ENV) $(PY) bench/bench_table.py
 	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
+	$(ENV) $(PY) bench/bench_ports.py
 
 clean:
 	rm -rf .colcon

@@ -19,11 +19,13 @@ from typing import Mapping, Optional, Tuple, Type
 import numpy as np
 
 from wafer_planner_ros.cell.schema import brief
+from wafer_planner_ros.cell.stations import INSIDE
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.geometry.contacts import colliding
+from wafer_planner_ros.geometry.ports import describe_deviation
 from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
-from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
+from wafer_planner_ros.trajectory.corridor import build_corridor, simplify, through_ports
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import CurveMethod, Draft, KnotTiming, METHODS
 from wafer_planner_ros.trajectory.methods import Shaped
@@ -93,6 +95,14 @@ class Endpoint:
     label: str
     configs: Tuple[Tuple[Optional[int], np.ndarray], ...]
     """(elbow branch or None for a joint request, q)."""
+    ways_out: Tuple[Optional[np.ndarray], ...] = ()
+    """Per configuration inside a port (a ``<station>:inside`` request, or joint angles
+    inside a port): the configurations out of the port to its retracted pose
+    (``Port.way_out``), else None; empty when no configuration is inside a port."""
+
+    def way_out(self, k: int) -> Optional[np.ndarray]:
+        """Return the way out of a port of configuration ``k`` (None: not inside one)."""
+        return self.ways_out[k] if self.ways_out else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,7 +128,8 @@ class PlanResult:
     roadmap_path: np.ndarray
     """(P, 3) the A* path from the roadmap."""
     path: np.ndarray
-    """(P', 3) the path the corridor was built on (after shortcuts)."""
+    """(P', 3) the path the corridor was built on (after shortcuts); an end inside a port
+    comes before (after) the retracted pose the roadmap path starts (ends) at."""
     metrics: Mapping = field(default_factory=dict)
     """What is measured nowhere else: path sizes and lengths, the method's figures."""
     timings_ms: Mapping = field(default_factory=dict)
@@ -148,10 +159,17 @@ class Planner:
         self.method = settings.method(cell, settings.timing, settings.shape)
 
     def endpoint(self, value, role: str) -> Endpoint:
-        """Resolve a station name or three joint angles; raise PlanningError if unusable."""
+        """
+        Resolve a station name or three joint angles; raise PlanningError if unusable.
+
+        ``<station>:inside`` names the station's pick/place pose inside its port; joint
+        angles that put the wafer inside a port are a pose inside it too, refused when
+        they break its tolerances.
+        """
         robot = self.cell.robot
         if isinstance(value, str):
-            station = self.cell.stations.get(value)
+            name = value[:-len(INSIDE)] if value.endswith(INSIDE) else value
+            station = self.cell.stations.get(name)
             if station is None:
                 names = sorted(self.cell.stations)
                 known = ', '.join(names[:KNOWN_LISTED]) + (
@@ -161,8 +179,18 @@ class Planner:
                                     f'{role} {value[:MAX_QUOTED]!r} is not a station of cell '
                                     f'{self.cell.name} ({known[:4 * MAX_QUOTED]})')
             joints = 'joints' in station.spec
+            if name == value:
+                return Endpoint(value, tuple((None if joints else c.elbow, c.q)
+                                             for c in station.configs))
+            if station.port is None:
+                raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                    f'{role} {value!r}: station {name} has no port (its '
+                                    'port: key in the cell file)')
+            retracted = {c.elbow: c.q for c in station.configs}
             return Endpoint(value, tuple((None if joints else c.elbow, c.q)
-                                         for c in station.configs))
+                                         for c in station.inside),
+                            tuple(station.port.way_out(robot.arm, c.q, retracted[c.elbow])
+                                  for c in station.inside))
         try:
             q = np.asarray(value, dtype=float).reshape(-1)
         except (TypeError, ValueError):
@@ -188,7 +216,29 @@ class Planner:
             code = ErrorCode.START_IN_COLLISION if role == 'start' else \
                 ErrorCode.GOAL_IN_COLLISION
             raise PlanningError(code, f'{role} {q.tolist()} is in collision ({how})')
-        return Endpoint(','.join(f'{v:g}' for v in q), ((None, q),))
+        label = ','.join(f'{v:g}' for v in q)
+        way = self._way_out(q, role)
+        return Endpoint(label, ((None, q),), () if way is None else (way,))
+
+    def _way_out(self, q: np.ndarray, role: str) -> Optional[np.ndarray]:
+        """Return the way out of the port joint angles ``q`` are inside, None if in none."""
+        ports = self.cell.port_model
+        k = int(ports.inside(q)[0])
+        if k < 0:
+            return None
+        how = describe_deviation(ports, q)
+        if how is not None:
+            raise PlanningError(ErrorCode.OUT_OF_LIMITS, f'{role} {q.tolist()}: {how}')
+        port, robot = ports.ports[k], self.cell.robot
+        retracted = port.configurations(robot.arm, np.zeros(1), q[1], near=q[None])[0]
+        lower, upper = robot.limits.position.T
+        if not np.all((retracted >= lower) & (retracted <= upper)):
+            raise PlanningError(ErrorCode.OUT_OF_LIMITS,
+                                f'{role} {q.tolist()} is inside the port of {port.station}, '
+                                f'whose retracted pose on its elbow branch '
+                                f'({retracted.round(4).tolist()}) is beyond '
+                                'robot.joint_limits.position')
+        return port.way_out(robot.arm, q, retracted)
 
     def plan(self, start, goal, deadline: Optional[float] = None,
              branches: Optional[Tuple[Optional[int], Optional[int]]] = None,
@@ -212,15 +262,16 @@ class Planner:
                     ((a, branches[0], 'start'), (b, branches[1], 'goal')))
         stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
         prepared, failure = [], None
-        for elbow_a, qa in a.configs:
-            for elbow_b, qb in b.configs:
+        for i, (elbow_a, qa) in enumerate(a.configs):
+            for j, (elbow_b, qb) in enumerate(b.configs):
                 if np.array_equal(qa, qb):
                     raise PlanningError(ErrorCode.INVALID_REQUEST,
                                         f'start and goal are the same configuration '
                                         f'{qa.tolist()}')
                 _check_deadline(deadline)
                 try:
-                    prepared.append(self._prepared(a, b, qa, qb, (elbow_a, elbow_b),
+                    prepared.append(self._prepared(a, b, (qa, a.way_out(i)),
+                                                   (qb, b.way_out(j)), (elbow_a, elbow_b),
                                                    stage_ms))
                 except PlanningError as exc:
                     logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
@@ -273,11 +324,19 @@ class Planner:
             given_up = []
         raise failure
 
-    def _prepared(self, a, b, qa, qb, branches, stage_ms) -> '_Prepared':
-        """Return the path, corridor and the method's draft between two configurations."""
+    def _prepared(self, a, b, start, goal, branches, stage_ms) -> '_Prepared':
+        """
+        Return the path, corridor and the method's draft between two configurations.
+
+        ``start``, ``goal``: (q, its way out of a port or None). From inside a port the
+        roadmap path starts at its retracted pose, and the corridor's control points are
+        joined to the channel's (``corridor.through_ports``).
+        """
+        (qa, way_a), (qb, way_b) = start, goal
         model = self.cell.motion_model  # the port margins too: the corridor keeps them
         lipschitz = model.lipschitz
-        route = find_path(self.roadmap, model, lipschitz, qa, qb)
+        route = find_path(self.roadmap, model, lipschitz,
+                          qa if way_a is None else way_a[-1], qb if way_b is None else way_b[-1])
         stage_ms['connect'] += route.connect_ms
         stage_ms['search'] += route.search_ms
         if route.path is None:
@@ -292,6 +351,9 @@ class Planner:
         corridor = build_corridor(path, model.body_clearance(path), lipschitz,
                                   per_body=self.settings.per_body_boxes,
                                   extra=self.settings.extra_points)
+        corridor = through_ports(corridor, way_a, None if way_b is None else way_b[::-1])
+        path = np.concatenate([qa[None] if way_a is not None else path[:0], path,
+                               qb[None] if way_b is not None else path[:0]])
         clock.lap('corridor')
         draft = self.method.draft(corridor)
         clock.lap('spline')
@@ -393,12 +455,14 @@ class _Clock:
 
 def _only_branch(end: Endpoint, elbow, role: str) -> Endpoint:
     """Return ``end`` with only its configuration on the ``elbow`` branch."""
-    configs = tuple(c for c in end.configs if c[0] == elbow)
+    kept = [k for k, c in enumerate(end.configs) if c[0] == elbow]
+    configs = tuple(end.configs[k] for k in kept)
     if not configs:
         raise PlanningError(ErrorCode.INVALID_REQUEST,
                             f'{role} {end.label} has no elbow branch {elbow!r} (it has '
                             f'{[c[0] for c in end.configs]})')
-    return replace(end, configs=configs)
+    return replace(end, configs=configs,
+                   ways_out=tuple(end.ways_out[k] for k in kept) if end.ways_out else ())
 
 
 def _check_deadline(deadline: Optional[float]) -> None:

@@ -19,6 +19,7 @@ from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
 from wafer_planner_ros.trajectory.coarse import coarse_start
 from wafer_planner_ros.trajectory.corridor import Corridor
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape import optimise_shape
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
@@ -146,12 +147,11 @@ class WholeCurve(KnotTiming):
                deadline: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
         start, corridor = draft.work
-        shape = self.shape
-        stage = replace(shape, min_spans=shape.coarse_spans)
+        shape = self.shape if corridor.proven else replace(self.shape, one_margin_outside=True)
+        spans = shape.coarse_spans if corridor.proven else shape.port_coarse_spans
         coarse = optimise_shape(
-            coarse_start(corridor.control_points, shape.coarse_spans, self.cell.robot,
-                         self.settings),
-            self.cell, stage, self.settings,
+            coarse_start(corridor.control_points, spans, self.cell.robot, self.settings),
+            self.cell, replace(shape, min_spans=spans), self.settings,
             None if give_up_above is None else shape.coarse_give_up * give_up_above,
             _past_budget(until, deadline), proven=False, first_proven=True)
         if coarse is None:
@@ -160,22 +160,27 @@ class WholeCurve(KnotTiming):
             coarse = replace(coarse, trajectory=None)  # no faster than the corridor's start
         # The corridor curve is what is returned then: its timing may take longer than the
         # budget (its λ-scaled start is up to 10 x slower), up to half-way to the deadline.
-        timed = None if coarse.trajectory is not None else super().finish(
-            start, deadline=deadline)
-        begin = coarse.trajectory if timed is None else timed.trajectory
+        fitted = coarse.trajectory is not None
+        timed = None if fitted else super().finish(start, deadline=deadline)
+        begin = coarse.trajectory if fitted else timed.trajectory
+        # Through a port's channel the corridor curve is proven on its own (``through_ports``).
+        proven = fitted or corridor.proven or prove(
+            begin, self.cell.motion_model, self.cell.motion_model.lipschitz).certified
         spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)
         shaped = optimise_shape(begin, self.cell, replace(shape, min_spans=spans),
-                                self.settings, give_up_above, until)
+                                self.settings, give_up_above, until, proven=proven)
         if shaped is None:
             return None
-        warnings = () if shaped.improved or timed is None else (
+        if shaped.trajectory is None:  # nothing proven: the verification refuses it
+            shaped = replace(shaped, trajectory=begin)
+        warnings = () if shaped.improved or fitted else (
             f'whole-curve optimisation found no faster proven curve ({shaped.message}); '
             'returning the corridor curve',)
-        metrics = {'optimised': shaped.improved or timed is None,
+        metrics = {'optimised': shaped.improved or fitted,
                    'coarse_iterations': coarse.iterations,
                    'shape_iterations': shaped.iterations, 'shape_rounds': shaped.rounds,
                    'spans': shaped.spans}
-        if timed is None:
+        if fitted:
             metrics['coarse_cycle_time'] = coarse.trajectory.duration
 
         def fallback() -> Shaped:

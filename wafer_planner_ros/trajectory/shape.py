@@ -37,6 +37,7 @@ from typing import Optional
 
 import numpy as np
 
+from wafer_planner_ros.geometry.ports import MARGINS
 from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
@@ -201,18 +202,30 @@ def _clearance_samples(problem: ShapeProblem, span, fraction, every_body: bool =
     """
     span, fraction = np.asarray(span, np.int64), np.asarray(fraction, float)
     start = problem.clearances(problem.start, span, fraction)          # (K, 4 + 4P)
-    near = start < problem.settings.watch
     model = problem.model
+    near = start < problem.settings.watch
     if every_body:
         near[:, :model.bodies] = True
+    outside = _outside_ports(start, model.bodies)
     if curve is not None:
-        near |= problem.clearances(curve, span, fraction) < problem.settings.watch
+        on_curve = problem.clearances(curve, span, fraction)
+        near |= on_curve < problem.settings.watch
+        outside &= _outside_ports(on_curve, model.bodies)
+    if problem.settings.one_margin_outside:
+        near[:, model.bodies:] &= ~np.repeat(outside, len(MARGINS), axis=1) | \
+            (np.arange(near.shape[1] - model.bodies) % len(MARGINS) == 0)
     k, body = np.nonzero(near)
     wanted = np.concatenate([np.full(model.bodies, problem.settings.clearance),
                              problem.settings.port_kept * model.tolerances])[body]
     start = start[k, body]
     kept = np.where(start > 0.0, np.minimum(wanted, 0.5 * start), wanted)
     return span[k], fraction[k], body, kept
+
+
+def _outside_ports(clearances: np.ndarray, bodies: int) -> np.ndarray:
+    """Return (K, P): at each sample, whether the four margins of each port are one value."""
+    margins = clearances[:, bodies:].reshape(len(clearances), -1, len(MARGINS))
+    return np.all(margins == margins[:, :, :1], axis=2)
 
 
 def _at_times(curve: CubicBSpline, times) -> tuple:

@@ -59,6 +59,21 @@ class ShapeSettings:
     given up), the two stages took 17 s in all where one stage from the corridor curve
     took 73 s, for the same fastest curve per pair within rounding (cycle time ratio:
     median 1.000, worst 1.003)."""
+    port_coarse_spans: int = 32
+    """Spans of the coarse stage for a curve into or out of a port (``through_ports``): its
+    straight channels need more spans than the corridor's coarse stage has. On the default
+    cell's four loaded port-to-port pairs 32 spans gave 1.02 x the optimal-control cycle
+    time on three and nothing proven on one (slow: see the README's figures)."""
+    one_margin_outside: bool = False
+    """Where the wafer is outside a port, constrain one of its four margins, not all: they
+    are then one value (how far outside) with one gradient, and the same row four times
+    leaves the QP degenerate (its active set cycled to the iteration limit). Set for
+    curves into or out of a port (``through_ports``): on the default cell's loaded
+    port-to-port moves loadport3 -> loadlock2 went from 1.87 x to 1.20 x the
+    optimal-control cycle time. Off otherwise: on the station pairs it changed one
+    elbow-branch combination (loadport3 -> loadlock1, left -> right: its coarse stage
+    proved nothing and its curve came out 1.3 % slower), where a row kept for all four
+    is one the next solve needs once the wafer enters the port."""
     coarse_give_up: float = 1.15
     """A coarse optimum this many times the best cycle time so far gives the combination up
     (``give_up_above``, plus ``TimingSettings.give_up_margin``: 1.173 x, after a converged

@@ -1,0 +1,119 @@
+"""Moves from and to inside a port: requested, planned through the channel, checked."""
+
+import copy
+
+from independent import check, port_ratios
+import numpy as np
+import pytest
+from wafer_planner_ros.cell.model import Cell
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.report import plan_json, roadmap_json
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
+import yaml
+
+
+def _planner(cell, roadmap_cache, method=KnotTiming):
+    cached = load_or_build(cell, cache_dir=roadmap_cache)
+    return Planner(cell, cached.roadmap, PlannerSettings(method=method)), roadmap_json(cached)
+
+
+def _ports_first_loadport_to_loadlock(cell):
+    names = sorted(cell.stations)
+    return (next(n for n in names if n.startswith('loadport')),
+            next(n for n in names if n.startswith('loadlock')))
+
+
+def _mouth_speed(cell, result, station):
+    """Return the wafer's speed (m/s) where it crosses the mouth of ``station``'s port."""
+    port = cell.stations[station].port
+    t = np.linspace(0.0, result.cycle_time, 20001)
+    q = result.trajectory.evaluate(t)
+    s = port.offsets(cell.robot.arm.wafer_center(q))[0]
+    k = int(np.argmin(np.abs(s)))
+    around = np.clip([t[k] - 1e-4, t[k] + 1e-4], 0.0, result.cycle_time)
+    a, b = cell.robot.arm.wafer_center(result.trajectory.evaluate(around))
+    return float(np.linalg.norm(b - a) / np.diff(around)[0])
+
+
+def test_a_move_from_inside_a_port_to_inside_another_passes_the_independent_check(
+        cell, roadmap_cache):
+    planner, info = _planner(cell, roadmap_cache)
+    loadport, loadlock = _ports_first_loadport_to_loadlock(cell)
+    result = planner.plan(f'{loadport}:inside', f'{loadlock}:inside')
+    plan = plan_json(result, info, cell.robot.joint_names)
+    ratios = check(cell, plan, result.start_q, result.goal_q)
+    assert result.verification.ok
+    inside = {c.elbow: c.q for c in cell.stations[loadport].inside}
+    assert np.array_equal(result.start_q, inside[result.branches[0]])
+    inside = {c.elbow: c.q for c in cell.stations[loadlock].inside}
+    assert np.array_equal(result.goal_q, inside[result.branches[1]])
+    # It went through both channels: the wafer was deep inside each port.
+    q = result.trajectory.evaluate(np.linspace(0.0, result.cycle_time, 2001))
+    where = cell.port_model.inside(q)
+    ports = [p.station for p in cell.port_model.ports]
+    assert where[0] == ports.index(loadport) and where[-1] == ports.index(loadlock)
+    assert 0.0 < ratios['port_lateral'] <= 1.0 and ratios['port_heading'] <= 1.0
+
+
+def test_joint_angles_inside_a_port_are_a_pose_inside_it(default_cell, roadmap_cache):
+    planner, info = _planner(default_cell, roadmap_cache)
+    inside = default_cell.stations['loadlock1'].inside[0].q
+    result = planner.plan(inside.tolist(), 'loadport2')
+    check(default_cell, plan_json(result, info, default_cell.robot.joint_names),
+          result.start_q, result.goal_q)
+    # The roadmap path starts at the retracted pose: the move left the port first.
+    assert len(planner.endpoint(inside.tolist(), 'start').ways_out) == 1
+    assert np.array_equal(result.path[0], inside)
+    assert default_cell.port_model.inside(result.path[1:2])[0] == -1
+
+
+def _off_axis(cell, station, s, offset):
+    port = cell.stations[station].port
+    centre = port.retracted + s * port.axis + offset * port.normal
+    return [c for c in cell.robot.arm.inverse(centre, port.heading, cell.robot.limits.position)
+            if c.elbow == 1][0].q
+
+
+def test_joint_angles_inside_a_port_but_off_its_axis_are_refused(default_cell, default_roadmap):
+    q = _off_axis(default_cell, 'loadport2', 0.2, 0.002)
+    assert port_ratios(default_cell, q[None])['port_lateral'] == pytest.approx(2.0)
+    with pytest.raises(PlanningError) as info:
+        Planner(default_cell, default_roadmap).plan(q.tolist(), 'loadlock1')
+    assert info.value.code is ErrorCode.OUT_OF_LIMITS
+    assert 'inside the port of loadport2 2.00 mm off its axis (tolerance 1.00 mm)' in \
+        info.value.message
+
+
+def test_inside_names_a_known_station_with_a_port(default_cell, default_roadmap):
+    document = yaml.safe_load(open(default_cell.source))
+    without = copy.deepcopy(document)
+    without['stations']['loadport1'].pop('port')
+    cell = Cell.from_dict(without)
+    with pytest.raises(PlanningError) as info:
+        Planner(cell, default_roadmap).endpoint('loadport1:inside', 'start')
+    assert info.value.code is ErrorCode.INVALID_REQUEST
+    assert 'station loadport1 has no port' in info.value.message
+    with pytest.raises(PlanningError) as info:
+        Planner(default_cell, default_roadmap).plan('loadport9:inside', 'loadlock1')
+    assert info.value.code is ErrorCode.UNKNOWN_STATION
+    assert "'loadport9:inside'" in info.value.message
+
+
+@pytest.mark.slow
+def test_the_whole_curve_leaves_and_enters_the_ports_without_stopping(default_cell,
+                                                                      roadmap_cache):
+    stop_and_go, _ = _planner(default_cell, roadmap_cache)
+    planner, info = _planner(default_cell, roadmap_cache, WholeCurve)
+    start, goal = 'loadport2:inside', 'loadlock1:inside'
+    result = planner.plan(start, goal)
+    check(default_cell, plan_json(result, info, default_cell.robot.joint_names),
+          result.start_q, result.goal_q)
+    assert result.metrics['optimised'] and result.verification.ok
+    # The corridor curve stops at both retracted poses; the whole curve does not.
+    stopping = stop_and_go.plan(start, goal)
+    assert _mouth_speed(default_cell, stopping, 'loadport2') < 1e-3
+    assert _mouth_speed(default_cell, result, 'loadport2') > 0.05
+    assert _mouth_speed(default_cell, result, 'loadlock1') > 0.05
+    assert result.cycle_time < 0.8 * stopping.cycle_time
