@@ -72,6 +72,12 @@ def test_the_plan_figure_marks_the_verified_closest_approach_and_names_branches(
                    and np.allclose(text.xy, wall) for text in motion.texts)
         assert abs(abs(wall[1]) - 0.45) < 1e-9 or abs(abs(wall[0]) - 0.85) < 1e-9
         assert set(default_cell.stations) <= {text.get_text() for text in motion.texts}
+        # Each port's axis, dashed, from its mouth to its pick/place pose.
+        dashed = [np.column_stack([line.get_xdata(), line.get_ydata()])
+                  for line in motion.lines if line.get_linestyle() == '--']
+        for port in default_cell.port_model.ports:
+            assert any(np.allclose(axis, [port.retracted, port.inside_center])
+                       for axis in dashed), port.station
         assert bar.get_ylabel() == 'time of the robot outlines (s)'
         assert bar.get_ylim() == pytest.approx((0.0, result.cycle_time))
         panel = next(axis for axis in figure.axes if axis.get_ylabel().startswith('jerk'))

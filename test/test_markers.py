@@ -378,7 +378,7 @@ def _colours(decoded) -> dict:
 def test_each_kind_of_thing_has_its_own_colour(cell, scenes):
     found = _colours(_decoded(scenes[0]) + _decoded(scenes[1]))
     expected = {'enclosure', 'stations', 'station_wafers', 'roadmap_nodes', 'roadmap_edges',
-                'path_joint_space', 'wafer_trace', 'robot'} | (
+                'ports', 'path_joint_space', 'wafer_trace', 'robot'} | (
                     {'obstacles'} if len(cell.obstacles) else set())
     assert set(found) == expected
     for a in found:
@@ -391,6 +391,20 @@ def test_each_kind_of_thing_has_its_own_colour(cell, scenes):
     assert len(trace.colors) == len(trace.points)
     start, end = trace.colors[0], trace.colors[-1]
     assert np.linalg.norm([start.r - end.r, start.g - end.g, start.b - end.b]) > 0.3
+
+
+def test_each_port_is_drawn_along_its_axis_from_its_mouth_to_its_pick_place_pose(
+        cell, scenes):
+    ports = next(m for m in _decoded(scenes[0]) if m.ns == 'ports')
+    segments = _points(ports)[:, :2].reshape(-1, 2, 2)
+    assert len(segments) == len(cell.stations)
+    arm = cell.robot.arm
+    for station in cell.stations.values():
+        inside = station.inside[0]
+        retracted = {c.elbow: c.q for c in station.configs}[inside.elbow]
+        wanted = np.array([arm.wafer_center(retracted), arm.wafer_center(inside.q)])
+        assert np.abs(segments - wanted).max(axis=(1, 2)).min() < 1e-6, station.name
+        assert np.linalg.norm(wanted[1] - wanted[0]) == pytest.approx(station.port.depth)
 
 
 def test_the_path_markers_follow_the_plan(cell, roadmap):

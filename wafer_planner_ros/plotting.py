@@ -74,11 +74,20 @@ def draw_cell(ax, cell) -> None:
 
 
 def draw_stations(ax, cell, colours: Optional[Sequence] = None) -> None:
-    """Mark every station at its wafer centre with its name (grey, or one colour each)."""
+    """
+    Mark every station at its wafer centre with its name (grey, or one colour each).
+
+    A station's port is drawn as its axis, dashed, from the retracted pose's wafer centre to
+    the pick/place pose's, which is marked by a dot.
+    """
     for i, (name, station) in enumerate(sorted(cell.stations.items())):
         colour = '0.35' if colours is None else colours[i]
         centre = cell.robot.arm.wafer_center(station.configs[0].q)
         ax.plot(*centre, marker='x', color=colour, markersize=6, linestyle='')
+        if station.port is not None:
+            axis = np.array([station.port.retracted, station.port.inside_center])
+            ax.plot(*axis.T, color=colour, linestyle='--', linewidth=1.0)
+            ax.plot(*axis[1], marker='.', color=colour, markersize=6, linestyle='')
         ax.annotate(name, centre, xytext=(4, 4), textcoords='offset points', fontsize=8,
                     color=colour, bbox={'facecolor': 'white', 'edgecolor': 'none',
                                         'alpha': 0.7, 'pad': 0.5})

@@ -44,6 +44,7 @@ COLOURS = {
     'roadmap_edges': (0.10, 0.45, 0.10, 0.25),   # dark green, faint
     'joint_space_box': (0.50, 0.50, 0.50, 1.0),  # mid grey
     'joint_space_labels': (0.85, 0.85, 0.85, 1.0),
+    'ports': (0.85, 0.05, 0.05, 1.0),             # red: each port's axis, mouth to pick/place
     'path_joint_space': (1.00, 0.85, 0.10, 1.0),  # yellow
     'robot': (0.00, 0.85, 0.85, 0.7),            # cyan: the outlines along a plan
 }
@@ -87,7 +88,8 @@ def roadmap_scene(cell, roadmap, frame_id: str, stamp) -> List[Marker]:
     obstacles). Then, in ``frame_id``: the enclosure, the obstacles, and at every station
     configuration the wafer (a disc of the wafer's radius), the links (capsules of their
     radii: a cylinder each, spheres at the joints) and a label naming the station and its
-    elbow branch; in the joint-space frame: the cube, its axis labels, the roadmap's nodes
+    elbow branch, and each port's axis from its mouth (the retracted pose's wafer centre) to
+    its pick/place pose; in the joint-space frame: the cube, its axis labels, the roadmap's nodes
     and edges and the stations' configurations. ``stamp``: a ROS time (``sec``,
     ``nanosec``) or a (sec, nanosec) pair.
     """
@@ -99,6 +101,10 @@ def roadmap_scene(cell, roadmap, frame_id: str, stamp) -> List[Marker]:
                 for k, polygon in enumerate(cell.obstacles)]
     names, configs = _station_configs(cell)
     markers += _stations(cell, cell_marker, names, configs)
+    axes = [(port.retracted, port.inside_center) for port in cell.port_model.ports]
+    if axes:
+        markers.append(_line(cell_marker, 'ports', 0, np.array(axes).reshape(-1, 2), 0.01,
+                             Shape.LINE_LIST))
     box = _JointBox(cell)
     nodes = box.place(roadmap.nodes)
     markers += box.frame_markers(joint_marker, cell.robot.joint_names)

@@ -147,7 +147,8 @@ class WholeCurve(KnotTiming):
                deadline: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
         start, corridor = draft.work
-        shape = self.shape if corridor.proven else replace(self.shape, one_margin_outside=True)
+        shape = self.shape if corridor.proven else replace(
+            self.shape, one_margin_outside=True, max_rounds=self.shape.port_max_rounds)
         spans = shape.coarse_spans if corridor.proven else shape.port_coarse_spans
         coarse = optimise_shape(
             coarse_start(corridor.control_points, spans, self.cell.robot, self.settings),

@@ -62,8 +62,16 @@ class ShapeSettings:
     port_coarse_spans: int = 32
     """Spans of the coarse stage for a curve into or out of a port (``through_ports``): its
     straight channels need more spans than the corridor's coarse stage has. On the default
-    cell's four loaded port-to-port pairs 32 spans gave 1.02 x the optimal-control cycle
-    time on three and nothing proven on one (slow: see the README's figures)."""
+    cell's four loaded port-to-port pairs 32 spans gave 1.02, 1.86, 1.02 and 1.20 x the
+    optimal-control cycle time; 16 spans proved no curve on loadport1 -> loadlock1 (2.77 x,
+    the corridor curve), 24 took twice as long in the fine stage."""
+    port_max_rounds: int = 14
+    """``max_rounds`` for a curve into or out of a port (``through_ports``): each round
+    of its coarse stage tends to break a port's tolerance somewhere else. Loaded, port to
+    port, on the default cell and both test cells (14 pairs, roadmap seed 0), 14 rounds in
+    place of 6 took loadport1 -> loadlock2 of the default cell from 1.86 x to 1.57 x the
+    optimal-control cycle time, and five pairs of the test cells from 1.2-2.1 x the
+    stop-and-go sequence to 0.65-0.93 x (no pair slower)."""
     one_margin_outside: bool = False
     """Where the wafer is outside a port, constrain one of its four margins, not all: they
     are then one value (how far outside) with one gradient, and the same row four times
