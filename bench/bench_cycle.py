@@ -60,7 +60,7 @@ def wafer_bound(cell, start: str, goal: str) -> float:
         cell.stations[start].configs[0].q))
     b = np.asarray(cell.stations[goal].spec.get('wafer_center') or cell.robot.arm.wafer_center(
         cell.stations[goal].configs[0].q))
-    limit = cell.robot.wafer_acceleration_limit
+    limit = cell.robot.wafer_limit.xy
     return float(2.0 * np.max(np.sqrt(np.abs(b - a) / limit)))
 
 

@@ -66,7 +66,7 @@ class CurvePath(toppra.interpolator.AbstractGeometricPath):
 def toppra_time(cell, trajectory) -> dict:
     """Return TOPP-RA's time-optimal duration of the curve, and its own limit ratios."""
     robot = cell.robot
-    arm, limit = robot.arm, robot.wafer_acceleration_limit
+    arm, limit = robot.arm, robot.wafer_limit.xy
     constraints = [
         tc.JointVelocityConstraint(np.column_stack([-robot.limits.velocity,
                                                     robot.limits.velocity])),

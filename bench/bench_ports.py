@@ -1,26 +1,27 @@
 """
-Moves from inside one port to inside another, loaded: non-stop against stop-and-go and the limit.
+Whole wafer moves, port to port: non-stop against stop-and-go and the limit, and the cycle.
 
-For each test cell (the default one, ``test/cells/*``) and each loadport -> loadlock pair,
+For each test cell (the default one, ``test/cells/*``) and each loadport/loadlock pair,
 roadmap seed 0 (the node's default), planned by the whole-curve optimiser as a
-``wafer-plan`` call does, unbudgeted:
+``wafer-plan`` call does, unbudgeted, the single-blade swap cycle (``service.cycle``, as
+``wafer-plan --cycle``):
 
-- non-stop: ``<loadport>:inside`` -> ``<loadlock>:inside``, one move;
-- stop-and-go: the retract (``<loadport>:inside`` -> ``<loadport>``), the transfer
-  (``<loadport>`` -> ``<loadlock>``) and the extend (``<loadlock>`` ->
-  ``<loadlock>:inside``), each from rest to rest, their cycle times added, on the same
-  elbow branch at each station (the fastest such chain);
-- the corridor curve of the non-stop move (knot timing alone: it stops at both port
+- non-stop: ``<loadport>:inside`` -> ``<loadlock>:inside`` loaded, then back empty on the
+  same elbow branches;
+- stop-and-go: each way a retract, a transfer and an extend, each from rest to rest and
+  loaded, on one elbow branch per station (the fastest such chain);
+- the corridor curve of the non-stop move out (knot timing alone: it stops at both port
   mouths).
 
-Each answer is verified by the planner (every limit and the port tolerances every
-millisecond, the collision proof). Reported per pair: the cycle times, planning time (s),
-non-stop / stop-and-go, and on the default cell non-stop / the optimal-control figure of
-the same move (direct collocation with IPOPT, every joint and wafer limit including jerk,
-the port model of the cell file; computed when ports were specified). Writes
+Each answer is verified by the planner (every limit of its set and the port tolerances
+every millisecond, the collision proof). Reported per pair: the cycle times, each non-stop
+move's planning time (s), the way out against its three stop-and-go moves, the cycle
+against the stop-and-go cycle, and on the default cell the way out against the
+optimal-control figure of the same move (direct collocation with IPOPT, every joint and
+wafer limit including jerk, the port model of the cell file). Writes
 ``results/ports.json``.
 
-Run: ``python bench/bench_ports.py``.
+Run: ``python bench/bench_ports.py [CELL_FILE ...]`` (default: the three cells).
 """
 
 import json
@@ -36,6 +37,7 @@ from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.cycle import loadport_loadlock_pairs, swap_cycle
 from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 
 HERE = Path(__file__).resolve().parent
@@ -43,13 +45,14 @@ RESULTS = HERE / 'results' / 'ports.json'
 OPTIMAL = {('loadport1', 'loadlock1'): 4.36, ('loadport1', 'loadlock2'): 3.67,
            ('loadport2', 'loadlock1'): 3.86, ('loadport3', 'loadlock2'): 2.80}
 """s: the optimal-control cycle time of the default cell's non-stop loaded moves."""
+DEFAULT_CELL = 'efem-3lp-2ll'
 
 
-def _timed(planner, start, goal, branches=None) -> tuple:
-    """Return (cycle time or None, planning s, error or None)."""
+def _timed(planner, start, goal) -> tuple:
+    """Return (cycle time or None, planning s, error or None) of an unrestricted plan."""
     began = time.perf_counter()
     try:
-        result = planner.plan(start, goal, branches=branches)
+        result = planner.plan(start, goal)
     except PlanningError as exc:
         return None, time.perf_counter() - began, f'{exc.code.name}: {exc.message}'
     assert result.verification.ok
@@ -57,63 +60,75 @@ def _timed(planner, start, goal, branches=None) -> tuple:
 
 
 def pair_row(planner, corridor, loadport, loadlock) -> dict:
-    """Return the figures of one pair."""
-    inside = (f'{loadport}:inside', f'{loadlock}:inside')
-    nonstop, seconds, error = _timed(planner, *inside)
-    stop_and_go, legs = None, None
-    for ea in [c.elbow for c in planner.cell.stations[loadport].inside]:
-        for eb in [c.elbow for c in planner.cell.stations[loadlock].inside]:
-            # One elbow branch per station: the retract ends where the transfer starts.
-            chain = [_timed(planner, a, b, branches) for a, b, branches in (
-                (inside[0], loadport, (ea, ea)), (loadport, loadlock, (ea, eb)),
-                (loadlock, inside[1], (eb, eb)))]
-            if all(t is not None for t, _, _ in chain) and (
-                    stop_and_go is None or sum(t for t, _, _ in chain) < stop_and_go):
-                stop_and_go, legs = sum(t for t, _, _ in chain), chain
-    row = {'loadport': loadport, 'loadlock': loadlock, 'non_stop': nonstop,
-           'planning_s': seconds, 'stop_and_go': stop_and_go,
-           'stop_and_go_legs': legs and [t for t, _, _ in legs],
-           'corridor_curve': _timed(corridor, *inside)[0], 'error': error}
-    if nonstop is not None and stop_and_go is not None:
-        row['non_stop_over_stop_and_go'] = nonstop / stop_and_go
-    optimal = OPTIMAL.get((loadport, loadlock)) if planner.cell.name == 'efem-3lp-2ll' \
+    """Return the figures of one pair: its swap cycle, each move timed."""
+    seconds = {}
+
+    def plan(start, goal, branches, load):
+        began = time.perf_counter()
+        try:
+            result = planner.plan(start, goal, branches=branches, load=load)
+        finally:
+            seconds[(start, goal, load, branches)] = time.perf_counter() - began
+        assert result.verification.ok
+        return result
+
+    cycle = swap_cycle(planner, loadport, loadlock, plan)
+    row = cycle.row()
+    out = cycle.moves[0]
+    row['planning_s'] = [seconds[(m.start, m.goal, m.load, None if m.branches == (None, None)
+                                  else m.branches)] for m in cycle.moves]
+    row['non_stop'] = out.cycle_time
+    row['corridor_curve'] = _timed(corridor, out.start, out.goal)[0]
+    chain = cycle.stop_and_go_moves
+    row['stop_and_go_out'] = sum(m.cycle_time for m in chain[:3]) if chain else None
+    if out.cycle_time is not None and row['stop_and_go_out'] is not None:
+        row['non_stop_over_stop_and_go'] = out.cycle_time / row['stop_and_go_out']
+    if cycle.cycle is not None and cycle.stop_and_go is not None:
+        row['cycle_over_stop_and_go'] = cycle.cycle / cycle.stop_and_go
+    optimal = OPTIMAL.get((loadport, loadlock)) if planner.cell.name == DEFAULT_CELL \
         else None
-    if optimal is not None and nonstop is not None:
+    if optimal is not None and out.cycle_time is not None:
         row['optimal_control'] = optimal
-        row['over_optimal_control'] = nonstop / optimal
+        row['over_optimal_control'] = out.cycle_time / optimal
     return row
 
 
-def main() -> int:
-    """Plan every cell's pairs and write the results."""
-    cells = [default_cell_path()] + sorted((HERE.parent / 'test' / 'cells').glob('*.yaml'))
+def main(argv=None) -> int:
+    """Plan every cell's pairs (or those of the cell files named) and write the results."""
+    named = sys.argv[1:] if argv is None else argv
+    cells = [Path(p) for p in named] or [default_cell_path()] + sorted(
+        (HERE.parent / 'test' / 'cells').glob('*.yaml'))
     report = {}
     for path in cells:
         cell = Cell.from_yaml(path)
         roadmap = load_or_build(cell).roadmap
         planner = Planner(cell, roadmap, PlannerSettings(method=WholeCurve))
         corridor = Planner(cell, roadmap, PlannerSettings(method=KnotTiming))
-        pairs = [(a, b) for a in sorted(cell.stations) for b in sorted(cell.stations)
-                 if a.startswith('loadport') and b.startswith('loadlock')]
-        if path == cells[0]:
-            pairs = list(OPTIMAL)
+        # The default cell: the pairs with an optimal-control figure.
+        pairs = list(OPTIMAL) if cell.name == DEFAULT_CELL else loadport_loadlock_pairs(cell)
         rows = []
         for loadport, loadlock in pairs:
             row = pair_row(planner, corridor, loadport, loadlock)
             rows.append(row)
-            print(f"{cell.name} {loadport} -> {loadlock}: non-stop {row['non_stop']} s "
-                  f"(x {row.get('over_optimal_control', float('nan')):.3f} of the limit) in "
-                  f"{row['planning_s']:.1f} s; stop-and-go {row['stop_and_go']} s "
-                  f"(x {row.get('non_stop_over_stop_and_go', float('nan')):.3f})"
-                  + (f"; {row['error']}" if row['error'] else ''), flush=True)
-        ratios = [r['over_optimal_control'] for r in rows if 'over_optimal_control' in r]
+            errors = [m['error'] for m in row['moves'] if m['error']]
+            print(f"{cell.name} {loadport} <-> {loadlock}: non-stop out {row['non_stop']} s "
+                  f"(x {row.get('over_optimal_control', float('nan')):.3f} of the limit, "
+                  f"x {row.get('non_stop_over_stop_and_go', float('nan')):.3f} of "
+                  f"stop-and-go) in {row['planning_s'][0]:.1f} s; cycle {row['cycle']} s "
+                  f"against stop-and-go {row['stop_and_go']} s "
+                  f"(x {row.get('cycle_over_stop_and_go', float('nan')):.3f})"
+                  + ''.join(f'; {e}' for e in errors), flush=True)
+
+        def median(key, rows=rows):
+            values = [r[key] for r in rows if r.get(key) is not None]
+            return float(np.median(values)) if values else None
+
         report[cell.name] = {
             'pairs': rows,
-            'median_over_optimal_control': float(np.median(ratios)) if ratios else None,
-            'median_non_stop_over_stop_and_go': float(np.median(
-                [r['non_stop_over_stop_and_go'] for r in rows
-                 if 'non_stop_over_stop_and_go' in r] or [np.nan])),
-            'median_planning_s': float(np.median([r['planning_s'] for r in rows]))}
+            'median_over_optimal_control': median('over_optimal_control'),
+            'median_non_stop_over_stop_and_go': median('non_stop_over_stop_and_go'),
+            'median_cycle_over_stop_and_go': median('cycle_over_stop_and_go'),
+            'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows]))}
     RESULTS.parent.mkdir(exist_ok=True)
     RESULTS.write_text(json.dumps({
         'cells': report,

@@ -219,10 +219,10 @@ class Peer:
             wafer = robot.arm.wafer_acceleration(q, qd, qdd)
             first = np.max(np.abs(qd) / robot.limits.velocity)
             second = [np.max(np.abs(qdd) / robot.limits.acceleration),
-                      np.max(np.abs(wafer) / robot.wafer_acceleration_limit)]
-            if robot.wafer_acceleration_norm_limit is not None:
+                      np.max(np.abs(wafer) / robot.wafer_limit.xy)]
+            if robot.wafer_limit.norm is not None:
                 second.append(np.max(np.linalg.norm(wafer, axis=-1))
-                              / robot.wafer_acceleration_norm_limit)
+                              / robot.wafer_limit.norm)
             factor = max(first, np.sqrt(max(second)))  # velocity goes as 1/s, the rest 1/s^2
             if factor <= 1.0 + TOLERANCE:
                 break
@@ -289,11 +289,11 @@ def _constraints(robot) -> list:
     """Return TOPP-RA's constraints: joint velocity and acceleration, wafer acceleration."""
     velocity, acceleration = robot.limits.velocity, robot.limits.acceleration
     normals = [np.eye(2), -np.eye(2)]
-    bounds = [robot.wafer_acceleration_limit, robot.wafer_acceleration_limit]
-    if robot.wafer_acceleration_norm_limit is not None:
+    bounds = [robot.wafer_limit.xy, robot.wafer_limit.xy]
+    if robot.wafer_limit.norm is not None:
         angles = 2.0 * np.pi * np.arange(NORM_FACETS) / NORM_FACETS
         normals.append(np.column_stack([np.cos(angles), np.sin(angles)]))
-        bounds.append(np.full(NORM_FACETS, robot.wafer_acceleration_norm_limit
+        bounds.append(np.full(NORM_FACETS, robot.wafer_limit.norm
                               * np.cos(np.pi / NORM_FACETS)))
     facets, limits = np.vstack(normals), np.concatenate(bounds)
     arm = robot.arm

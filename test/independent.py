@@ -18,6 +18,7 @@ STEP = 1e-4  # s, time step of the checks
 def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
     """Assert everything a user relies on; return the measured ratios."""
     robot = cell.robot
+    limits = robot.limit_sets[plan['load']]  # loaded: the wafer limit too; empty: not
     knots = np.array(plan['spline']['knots'])
     points = np.array(plan['spline']['control_points'])
     curve = BSpline(knots, points, 3)
@@ -31,23 +32,23 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
     # scipy's recursion divides by spans as short as 1 ms: zero comes out as ~1e-9.
     assert np.abs(qd[[0, -1]]).max() < 1e-6 and np.abs(qdd[[0, -1]]).max() < 1e-6
     # Joint limits.
-    lower, upper = robot.limits.position.T
+    lower, upper = limits.joints.position.T
     assert np.all(q >= lower) and np.all(q <= upper)
-    ratios = {'velocity': float(np.max(np.abs(qd) / robot.limits.velocity)),
-              'acceleration': float(np.max(np.abs(qdd) / robot.limits.acceleration))}
-    if robot.limits.jerk is not None:
+    ratios = {'velocity': float(np.max(np.abs(qd) / limits.joints.velocity)),
+              'acceleration': float(np.max(np.abs(qdd) / limits.joints.acceleration))}
+    if limits.joints.jerk is not None:
         # Differences of the acceleration: averages of the jerk, never above its peak.
         jerk = np.diff(qdd, axis=0) / np.diff(t)[:, None]
-        ratios['jerk'] = float(np.max(np.abs(jerk) / robot.limits.jerk))
+        ratios['jerk'] = float(np.max(np.abs(jerk) / limits.joints.jerk))
     # Wafer acceleration from positions only.
     h = 1e-4
     inner = t[(t > h) & (t < duration - h)]
     centre = [_wafer_centre(robot, curve(inner + s)) for s in (-h, 0.0, h)]
     wafer = (centre[0] - 2 * centre[1] + centre[2]) / h ** 2
-    ratios['wafer'] = float(np.max(np.abs(wafer) / robot.wafer_acceleration_limit))
-    if robot.wafer_acceleration_norm_limit is not None:
-        ratios['wafer_norm'] = float(np.max(np.hypot(*wafer.T))
-                                     / robot.wafer_acceleration_norm_limit)
+    if limits.wafer is not None:
+        ratios['wafer'] = float(np.max(np.abs(wafer) / limits.wafer.xy))
+    if limits.wafer is not None and limits.wafer.norm is not None:
+        ratios['wafer_norm'] = float(np.max(np.hypot(*wafer.T)) / limits.wafer.norm)
     ratios.update(port_ratios(cell, q))
     for name, ratio in ratios.items():
         assert ratio <= 1.0 + 1e-6, f'{name} reaches {ratio} x its limit'

@@ -39,8 +39,11 @@ def test_default_cell_has_the_spec_values(default_cell):
     assert r.limits.velocity.tolist() == [4.2, 8.4, 6.3]
     assert r.limits.acceleration.tolist() == [8.4, 16.8, 12.6]
     assert r.limits.jerk.tolist() == [84.0, 168.0, 126.0]  # 10 x acceleration
-    assert r.wafer_acceleration_limit.tolist() == [0.981, 0.981]
-    assert r.wafer_acceleration_norm_limit is None
+    assert r.wafer_limit.xy.tolist() == [0.981, 0.981]
+    assert r.wafer_limit.norm is None
+    # Empty: the loaded joint limits (none raised in the file), no wafer limit.
+    empty = r.limit_sets['empty']
+    assert empty.wafer is None and empty.joints.velocity is r.limits.velocity
     assert sorted(cell.stations) == ['loadlock1', 'loadlock2', 'loadport1', 'loadport2',
                                      'loadport3']
     for station in cell.stations.values():
@@ -150,6 +153,14 @@ BAD_VALUES = [
      'too small'),
     ('robot.wafer_acceleration_norm_limit', 1e-300, 'robot.wafer_acceleration_norm_limit',
      'too small'),
+    ('robot.empty_joint_limits', {'velocity': [8.4, 16.8, 1e-300]},
+     'robot.empty_joint_limits.velocity[2]', 'too small'),
+    ('robot.empty_joint_limits', {'velocity': [8.4, -1.0, 12.6]},
+     'robot.empty_joint_limits.velocity[1]', 'must be > 0'),
+    ('robot.empty_joint_limits', {'position': [[-3, 3]] * 3},
+     'robot.empty_joint_limits.position', 'unknown key'),
+    ('robot.empty_joint_limits', [8.4, 16.8, 12.6], 'robot.empty_joint_limits',
+     'must be a mapping'),
     ('robot.joint_limits.position', [[-1e300, 3], [-3, 3], [-3, 3]],
      'robot.joint_limits.position[0][0]', 'not a plausible joint limit'),
     ('cell.boundary', [[-0.85, -0.45], [1e308, -0.45], [0.85, 0.45], [-0.85, 0.45]],
@@ -223,7 +234,7 @@ def test_a_limit_just_inside_an_hour_of_motion_is_accepted(document):
     doc = copy.deepcopy(document)
     # 2 sqrt(1.88 m / a) = 3,000 s: slow, but a real (if odd) cell.
     doc['robot']['wafer_acceleration_limit'] = [8.4e-7, 8.4e-7]
-    assert Cell.from_dict(doc).robot.wafer_acceleration_limit[0] == 8.4e-7
+    assert Cell.from_dict(doc).robot.wafer_limit.xy[0] == 8.4e-7
 
 
 def test_the_clearance_margin_is_kept_by_every_collision_test(document, default_cell):
@@ -355,7 +366,7 @@ def _fastest_by_lp(distance, v, a, j, duration, steps=400) -> bool:
     (1.0, 1.0, 100.0, 100.0),
 ])
 def test_the_shortest_motion_is_what_an_independent_optimum_reaches(distance, v, a, j):
-    from wafer_planner_ros.cell.robot import JointLimits
+    from wafer_planner_ros.cell.limits import JointLimits
     limits = JointLimits(np.zeros((1, 2)), np.array([v]), np.array([a]), np.array([j]))
     shortest = float(limits.shortest_motion([distance])[0])
     assert _fastest_by_lp(distance, v, a, j, 1.01 * shortest)

@@ -99,6 +99,40 @@ def test_all_pairs_table_and_json_file(roadmap_cache, capsys, tmp_path):
     assert 'λ-scaled' in out and out.count(' ok ') == 12
 
 
+def test_the_swap_cycle_of_every_loadport_loadlock_pair(roadmap_cache, capsys, tmp_path):
+    out_file, png = tmp_path / 'cycle.json', tmp_path / 'cycle.png'
+    # The corridor curve (knot timing) keeps it to seconds; what is checked is the bookkeeping.
+    code, out, err = _run(capsys, '--cycle', '--method', 'knot-timing', '--cache-dir',
+                          str(roadmap_cache), '--json', str(out_file), '--plot', str(png))
+    assert code == 0, out + err
+    rows = json.loads(out_file.read_text())
+    assert [(r['loadport'], r['loadlock']) for r in rows] == [
+        (f'loadport{a}', f'loadlock{b}') for a in (1, 2, 3) for b in (1, 2)]
+    for row in rows:
+        out_move, back = row['moves']
+        assert (out_move['from'], out_move['to'], out_move['load']) == (
+            f"{row['loadport']}:inside", f"{row['loadlock']}:inside", 'loaded')
+        assert (back['from'], back['to'], back['load']) == (
+            out_move['to'], out_move['from'], 'empty')
+        assert back['branches'] == out_move['branches'][::-1]  # the cycle repeats
+        assert row['cycle'] == pytest.approx(out_move['cycle_time'] + back['cycle_time'])
+        chain = row['stop_and_go_moves']
+        assert [m['load'] for m in chain] == ['loaded'] * 6
+        assert [(m['from'], m['to']) for m in chain][::3] == [
+            (out_move['from'], row['loadport']), (back['from'], row['loadlock'])]
+        assert all(a['to'] == b['from'] and a['branches'][1] == b['branches'][0]
+                   for a, b in zip(chain, chain[1:]))
+        assert row['stop_and_go'] == pytest.approx(sum(m['cycle_time'] for m in chain))
+        assert row['wafers_per_hour'] == pytest.approx(3600.0 / row['cycle'])
+        assert row['gain'] == pytest.approx(row['stop_and_go'] / row['cycle'])
+    assert 'loadport1 <-> loadlock1' in out and 'wafers/h' in out
+    assert png.read_bytes()[:4] == b'\x89PNG'
+    code, _, err = _run(capsys, '--cycle', '--all-pairs')
+    assert code == 2 and 'not both' in err
+    code, _, err = _run(capsys, '--cycle', '--load', 'empty')
+    assert code == 2 and 'no --load' in err
+
+
 def test_planning_failure_exits_1_and_usage_errors_exit_2(roadmap_cache, capsys):
     code, out, _ = _run(capsys, 'loadport9', 'loadlock1', '--cache-dir', str(roadmap_cache))
     assert code == 1 and 'UNKNOWN_STATION' in out

@@ -43,6 +43,19 @@ def test_station_request_publishes_the_core_planners_trajectory(harness, default
           core.start_q, core.goal_q)
 
 
+def test_an_empty_station_request_is_planned_and_answered_empty(
+        harness, default_cell, default_roadmap):
+    harness.send_stations({'id': 'e1', 'from': 'loadport2', 'to': 'loadlock1',
+                           'load': 'empty'})
+    harness.send_stations({'id': 'e2', 'from': 'loadport2', 'to': 'loadlock1'})
+    empty, loaded = (values(harness.result(request_id)) for request_id in ('e1', 'e2'))
+    assert (empty['code'], empty['load'], loaded['load']) == ('OK', 'empty', 'loaded')
+    core = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock1', load='empty')
+    assert float(empty['cycle_time']) == pytest.approx(core.cycle_time, rel=1e-12)
+    assert float(empty['cycle_time']) < float(loaded['cycle_time'])
+    assert 'ratio_wafer_x' not in empty and 'ratio_wafer_x' in loaded
+
+
 def test_joint_request_in_any_joint_order(harness, default_cell):
     start = default_cell.stations['loadport1'].configs[0].q
     goal = default_cell.stations['loadlock2'].configs[0].q

@@ -189,11 +189,11 @@ def test_a_station_pair_of_the_table_is_answered_at_once_while_joint_requests_pl
     from wafer_planner_ros.service.planning import PlanningService
     answer = PlanningService.answer
 
-    def slow(service, start, goal, deadline=None):
+    def slow(service, start, goal, deadline=None, load='loaded'):
         """Plan as the node does, each joint request taking half a second more."""
         if not isinstance(start, str):
             time.sleep(0.5)
-        return answer(service, start, goal, deadline)
+        return answer(service, start, goal, deadline, load)
     monkeypatch.setattr(PlanningService, 'answer', slow)
     table_node.node.set_parameters([Parameter('planning.optimise_budget', value=1.0)])
     try:
@@ -222,11 +222,11 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
     pairs = _far_joint_requests(default_cell, 5)
     answer = PlanningService.answer
 
-    def stalled(service, start, goal, deadline=None):
+    def stalled(service, start, goal, deadline=None, load='loaded'):
         """Plan as the node does, but the first request stalls (a stage overrunning)."""
         if np.array_equal(start, pairs[0][0]) and np.array_equal(goal, pairs[0][1]):
             time.sleep(3 * timeout)
-        return answer(service, start, goal, deadline)
+        return answer(service, start, goal, deadline, load)
     monkeypatch.setattr(PlanningService, 'answer', stalled)
     table_node.node.set_parameters([Parameter('planning.timeout', value=timeout),
                                     Parameter('planning.max_queue', value=3)])

@@ -91,7 +91,8 @@ def test_a_jerk_limit_is_met_everywhere(default_cell, default_roadmap):
     robot = default_cell.robot
     jerk = robot.limits.jerk
     assert np.array_equal(jerk, [84.0, 168.0, 126.0])  # efem_default.yaml: 10 x acceleration
-    cell = replace(default_cell, robot=replace(robot, limits=replace(robot.limits, jerk=None)))
+    cell = replace(default_cell, robot=robot.with_limit_set(replace(
+        robot.limit_set, joints=replace(robot.limits, jerk=None))))
     free = Planner(cell, default_roadmap).plan('loadport2', 'loadlock2')
     limited = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock2')
     # Without a limit no span is shorter than the documented minimum.

@@ -43,6 +43,15 @@ def test_a_number_no_float_holds_is_not_finite_naming_the_field(end, field, show
     assert error.message == f'{field} is not a finite number ({shown})'
 
 
+def test_a_station_request_is_loaded_unless_it_says_empty():
+    assert station_request(_station('"loadport1"'), JOINTS).load == 'loaded'
+    empty = station_request('{"id": "x", "from": [0.1, 0.2, 0.3], "to": "loadlock1:inside", '
+                            '"load": "empty"}', JOINTS)
+    assert empty.load == 'empty' and empty.goal == 'loadlock1:inside'
+    # A joint request has no field for it: loaded, the safe side.
+    assert joint_request('r1', [], [[0, 0, 0], [1, 1, 1]], JOINTS).load == 'loaded'
+
+
 def test_the_largest_numbers_a_float_holds_are_read():
     request = station_request(_station('[1' + '0' * 308 + ', -1.7976931348623157e308, 0]'),
                               JOINTS)
@@ -66,8 +75,12 @@ def test_the_largest_numbers_a_float_holds_are_read():
     (_station('"a\\udfff"'), 'x', '"from" "a\\udfff" is not valid Unicode'),
     (_station(json.dumps('s' * 50000)), 'x', '"from" "sss'),
     ('{"id": "x", "from": "a", "to": "b", "speed": 2}', 'x',
-     'the request has unknown keys ["speed"]; a station request has only "id", "from" and '
-     '"to"'),
+     'the request has unknown keys ["speed"]; a station request has only "id", "from", "to" '
+     'and "load"'),
+    ('{"id": "x", "from": "a", "to": "b", "load": "light"}', 'x',
+     '"load" must be one of ["loaded", "empty"], got "light"'),
+    ('{"id": "x", "from": "a", "to": "b", "load": null}', 'x',
+     '"load" must be one of ["loaded", "empty"], got null'),
     ('{"id": "x", "from": "a", "to": "b", "to": "c"}', 'x', 'has ["to"] more than once'),
     (_station('[true, 0, 0]'), 'x', 'got [true, 0, 0]'),
     (_station('{"q": [1, 2, 3]}'), 'x', 'got {"q": [1, 2, 3]}'),

@@ -118,7 +118,7 @@ def test_the_rows_are_the_limits_and_clearances_they_stand_for(default_cell, cor
     span, fraction = wafer
     t = curve.breaks()[span] + intervals[span] * fraction
     ax, ay = robot.arm.wafer_acceleration_xy(reference(t), reference(t, 1), reference(t, 2))
-    limit = margin * robot.wafer_acceleration_limit
+    limit = margin * robot.wafer_limit.xy
     expected = np.concatenate([1.0 - (ax / limit[0]) ** 2, 1.0 - (ay / limit[1]) ** 2])
     assert np.allclose(values[len(control):len(control) + len(expected)], expected, atol=1e-9)
     # Clearance: (d - kept) / CLEARANCE_SCALE for the body named.

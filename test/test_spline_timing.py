@@ -127,8 +127,9 @@ def test_constraint_gradients_are_exact(default_cell, default_roadmap):
     _check_gradients(problem, corridor, default_cell)
     # Every kind of row: jerk control points and the |a| limit too.
     robot = default_cell.robot
-    limited = replace(robot, limits=replace(robot.limits, jerk=np.array([84.0, 168.0, 126.0])),
-                      wafer_acceleration_norm_limit=3.0)
+    limited = robot.with_limit_set(replace(
+        robot.limit_set, joints=replace(robot.limits, jerk=np.array([84.0, 168.0, 126.0])),
+        wafer=replace(robot.wafer_limit, norm=3.0)))
     _check_gradients(TimingProblem(corridor.control_points, limited), corridor, default_cell)
 
 
@@ -150,10 +151,11 @@ def _check_gradients(problem, corridor, default_cell):
     spline = CubicBSpline.from_intervals(corridor.control_points, h)
     t = spline.knots[span + 3] + h[span] * samples.fraction
     ax, ay = default_cell.robot.arm.wafer_acceleration(*spline.evaluate_orders(t)).T
-    wafer = default_cell.robot.wafer_acceleration_limit
+    wafer = default_cell.robot.wafer_limit.xy
     expected = [1 - (ax / (MARGIN * wafer[0])) ** 2, 1 - (ay / (MARGIN * wafer[1])) ** 2]
-    if problem.wafer_norm is not None:
-        expected.append(1 - (ax ** 2 + ay ** 2) / (MARGIN * problem.wafer_norm) ** 2)
+    norm = problem.limit_set.wafer.norm
+    if norm is not None:
+        expected.append(1 - (ax ** 2 + ay ** 2) / (MARGIN * norm) ** 2)
     expected = np.concatenate(expected)
     assert np.allclose(problem.wafer_constraints(h, samples), expected, rtol=1e-9, atol=1e-9)
 
@@ -215,7 +217,9 @@ def test_the_lambda_scaled_start_meets_every_limit_where_verification_checks(
 
 
 def test_each_limit_ratio_scales_with_its_order_in_time(default_cell, spline):
-    robot = replace(default_cell.robot, wafer_acceleration_norm_limit=3.0)  # every limit
+    robot = default_cell.robot  # every limit
+    robot = robot.with_limit_set(replace(robot.limit_set,
+                                         wafer=replace(robot.wafer_limit, norm=3.0)))
     assert set(limit_ratios(spline, robot)) == set(LIMIT_ORDERS)
     slower = 1.7
     slowed = CubicBSpline.from_intervals(spline.control_points, slower * spline.intervals)

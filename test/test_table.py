@@ -307,8 +307,8 @@ def test_a_retaught_station_replans_only_its_own_pairs(default_cell, tmp_path, m
         assert answer.verification.ok and np.array_equal(answer.positions[-1], answer.goal_q)
     # Another robot (a limit changed): nothing is inherited.
     robot = moved.robot
-    slower = replace(moved, robot=replace(robot, limits=replace(
-        robot.limits, velocity=0.9 * robot.limits.velocity)))
+    slower = replace(moved, robot=robot.with_limit_set(replace(robot.limit_set, joints=replace(
+        robot.limits, velocity=0.9 * robot.limits.velocity))))
     assert inherited_table(Planner(slower, second.roadmap), cache) is None
 
 

@@ -18,6 +18,7 @@ from typing import Mapping, Optional, Tuple, Type
 
 import numpy as np
 
+from wafer_planner_ros.cell.limits import LOADS
 from wafer_planner_ros.cell.schema import brief
 from wafer_planner_ros.cell.stations import INSIDE
 from wafer_planner_ros.errors import ErrorCode, PlanningError
@@ -115,6 +116,8 @@ class PlanResult:
     goal_q: np.ndarray
     branches: Tuple[Optional[int], Optional[int]]
     """The elbow branches used at start and goal (None for joint requests)."""
+    load: str
+    """The limit set planned and verified against (``cell.limits``: loaded or empty)."""
     trajectory: Trajectory
     initial_cycle_time: float
     """s: the cycle time the curve method started from (the paper's λ-scaled timing)."""
@@ -157,6 +160,23 @@ class Planner:
         self.roadmap = roadmap
         self.settings = settings
         self.method = settings.method(cell, settings.timing, settings.shape)
+        self._by_load = {cell.robot.load: self}
+
+    @property
+    def load(self) -> str:
+        """Return the limit set this planner plans against (``cell.limits``)."""
+        return self.cell.robot.load
+
+    def for_load(self, load: str) -> 'Planner':
+        """Return the planner of this cell and roadmap against the limit set ``load``."""
+        if load not in self._by_load:
+            if load not in LOADS:
+                raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                    f'unknown load {brief(load)}: one of {", ".join(LOADS)}')
+            planner = Planner(self.cell.with_load(load), self.roadmap, self.settings)
+            planner._by_load = self._by_load  # one planner per limit set, shared
+            self._by_load[load] = planner
+        return self._by_load[load]
 
     def endpoint(self, value, role: str) -> Endpoint:
         """
@@ -242,9 +262,13 @@ class Planner:
 
     def plan(self, start, goal, deadline: Optional[float] = None,
              branches: Optional[Tuple[Optional[int], Optional[int]]] = None,
-             budget: Optional[float] = None) -> PlanResult:
+             budget: Optional[float] = None, load: Optional[str] = None) -> PlanResult:
         """
         Return the verified trajectory from start to goal with the shortest cycle time.
+
+        ``load``: the limit set, ``LOADED`` (a wafer on the blade: the wafer limit holds)
+        or ``EMPTY`` (none: joint limits only); None: this planner's (``load``). An empty
+        move made with a wafer on the blade can slide it.
 
         ``deadline``: a ``time.monotonic()`` instant after which the request gives up with
         TIMEOUT. ``branches``: plan only this (start, goal) elbow-branch combination (None
@@ -254,6 +278,8 @@ class Planner:
         given up when one is. Raises PlanningError with the code of the first reason it
         cannot answer.
         """
+        if load is not None and load != self.load:
+            return self.for_load(load).plan(start, goal, deadline, branches, budget)
         begun = time.perf_counter()
         until = None if budget is None else time.monotonic() + budget
         a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
@@ -395,8 +421,9 @@ class Planner:
             self.settings.sample_period)
         return PlanResult(
             start=pair.a, goal=pair.b, start_q=pair.qa, goal_q=pair.qb, branches=pair.branches,
-            trajectory=trajectory, initial_cycle_time=candidate.shaped.initial_cycle_time,
-            verification=checked, times=times, positions=positions, velocities=velocities,
+            load=self.load, trajectory=trajectory,
+            initial_cycle_time=candidate.shaped.initial_cycle_time, verification=checked,
+            times=times, positions=positions, velocities=velocities,
             accelerations=accelerations, roadmap_path=pair.roadmap_path, path=pair.path,
             metrics=metrics, timings_ms=timings_ms, warnings=candidate.shaped.warnings)
 

@@ -20,6 +20,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Polygon
 import numpy as np
 
+from wafer_planner_ros.cell.limits import LOADED
 from wafer_planner_ros.geometry.contacts import BodyContact, colliding
 from wafer_planner_ros.geometry.kinematics import elbow_words
 from wafer_planner_ros.roadmap.graph import SAMPLER_NAMES
@@ -161,22 +162,49 @@ def plot_trajectory(cell, result, path, outlines: int = 14) -> Figure:
     """Write a PNG of a plan like the paper's Figs. 10-13: motion, joints, wafer."""
     t = np.linspace(0.0, result.cycle_time, 1500)
     q, qd, qdd, qddd = result.trajectory.evaluate_orders(t, range(4))
-    return plot_motion(cell, t, q, qd, qdd,
-                       f'{motion_label(result.start.label, result.goal.label, result.branches)}'
-                       f': cycle time {result.cycle_time:.3f} s (λ-scaled start '
+    loaded = result.load == LOADED
+    ends = motion_label(result.start.label, result.goal.label, result.branches)
+    return plot_motion(cell.with_load(result.load), t, q, qd, qdd,
+                       f'{ends}{"" if loaded else " (empty)"}: cycle time '
+                       f'{result.cycle_time:.3f} s (λ-scaled start '
                        f'{result.initial_cycle_time:.3f} s)', path, outlines, qddd=qddd,
                        curve=result.trajectory)
 
 
+def plot_cycle(cell, cycle, path, outlines: int = 20) -> Figure:
+    """
+    Write a PNG of one swap cycle (``service.cycle``): the way out, loaded, then back, empty.
+
+    The figure is ``plot_motion``'s; the wafer limit drawn is the loaded one, which the way
+    back (no wafer on the blade, shaded) need not keep.
+    """
+    out, back = (move.result for move in cycle.moves)
+    times, states = [], []
+    for offset, result in ((0.0, out.trajectory), (out.cycle_time, back.trajectory)):
+        t = np.linspace(0.0, result.duration, 1000)
+        times.append(offset + t)
+        states.append(result.evaluate_orders(t, range(4)))
+    q, qd, qdd, qddd = (np.concatenate([s[k] for s in states]) for k in range(4))
+    title = (f'{cycle.loadport} ⇄ {cycle.loadlock}: swap cycle {cycle.cycle:.3f} s per wafer '
+             f'(loaded out 0–{out.cycle_time:.3f} s, empty back to {cycle.cycle:.3f} s: no '
+             'wafer limit)' + ('' if cycle.stop_and_go is None else
+                               f'; stop-and-go {cycle.stop_and_go:.3f} s'))
+    return plot_motion(cell, np.concatenate(times), q, qd, qdd, title, path, outlines,
+                       qddd=qddd, empty_from=out.cycle_time)
+
+
 def plot_motion(cell, times, q, qd, qdd, title: str, path, outlines: int = 14,
-                dpi: int = 100, qddd=None, curve=None) -> Figure:
+                dpi: int = 100, qddd=None, curve=None,
+                empty_from: Optional[float] = None) -> Figure:
     """
     Write a PNG of a sampled motion like the paper's Figs. 10-13.
 
     The enclosure with the stations, the robot's outline at ``outlines`` instants coloured
     by time (with a colour bar), the wafer-centre trace and the closest approach to a wall
     or obstacle (the robot then, and the distance); joint position, velocity, acceleration
-    and jerk against their limits; the wafer acceleration along x and y against its limit.
+    and jerk against their limits; the wafer acceleration along x and y against its limit
+    (of ``cell``'s limit set in use: an empty move's has none, ``Cell.with_load``; from
+    ``empty_from`` s on the motion is empty, shaded, and not held to it).
     ``times`` (N,) s; ``q``, ``qd``, ``qdd`` (N, J) in the robot's joint order; ``qddd`` the
     jerk, or None to difference it from the accelerations (samples of a recording).
     ``curve``: the ``Trajectory`` sampled, on which the closest approach is found as the
@@ -203,7 +231,7 @@ def plot_motion(cell, times, q, qd, qdd, title: str, path, outlines: int = 14,
     ax.set_title(_wrapped(title, 120, most=3), parse_math=False)
     _draw_joints(fig, grid, robot, times, (q, qd, qdd, np.asarray(qddd, float)), jerk_label)
     _draw_wafer(fig.add_subplot(grid[3, :2]), robot, times,
-                robot.arm.wafer_acceleration(q, qd, qdd))
+                robot.arm.wafer_acceleration(q, qd, qdd), empty_from)
     fig.savefig(path, dpi=dpi)
     return fig
 
@@ -346,22 +374,28 @@ def _draw_joints(fig, grid, robot, times, series, jerk_label: str) -> None:
     axis.set_xlabel('t (s)')
 
 
-def _draw_wafer(axis, robot, times, wafer) -> None:
-    handles = []
+def _draw_wafer(axis, robot, times, wafer, empty_from: Optional[float] = None) -> None:
+    handles, limit = [], robot.wafer_limit  # None: an empty move, no wafer limit
+    held = times <= (np.inf if empty_from is None else empty_from)  # the limit applies
     for k, name in enumerate('xy'):
-        limit = robot.wafer_acceleration_limit[k]
-        line, = axis.plot(times, wafer[:, k],
-                          label=f'a_{name} (peak {_peak(np.abs(wafer[:, k]) / limit):.1%})')
+        peak = '' if limit is None else \
+            f' (peak {_peak(np.abs(wafer[held, k]) / limit.xy[k]):.1%})'
+        line, = axis.plot(times, wafer[:, k], label=f'a_{name}{peak}')
         handles.append(line)
-        axis.axhline(limit, color=line.get_color(), linestyle='--', linewidth=0.8)
-        axis.axhline(-limit, color=line.get_color(), linestyle='--', linewidth=0.8)
-    norm_limit = robot.wafer_acceleration_norm_limit
-    if norm_limit is not None:
+        if limit is not None:
+            axis.axhline(limit.xy[k], color=line.get_color(), linestyle='--', linewidth=0.8)
+            axis.axhline(-limit.xy[k], color=line.get_color(), linestyle='--', linewidth=0.8)
+    if limit is not None and limit.norm is not None:
         norm = np.hypot(wafer[:, 0], wafer[:, 1])
         handles += axis.plot(times, norm, color='black',
-                             label=f'|a| (peak {_peak(norm / norm_limit):.1%})')
-        axis.axhline(norm_limit, color='black', linestyle='--', linewidth=0.8)
-    axis.set_ylabel('wafer acceleration (m/s²)')
+                             label=f'|a| (peak {_peak(norm[held] / limit.norm):.1%})')
+        axis.axhline(limit.norm, color='black', linestyle='--', linewidth=0.8)
+    if empty_from is not None:
+        axis.axvspan(empty_from, times[-1], color='0.9', zorder=0)
+        axis.text(empty_from, 0.97, ' empty: no wafer limit', ha='left', va='top',
+                  transform=axis.get_xaxis_transform(), fontsize=8)
+    axis.set_ylabel('wafer acceleration (m/s²)' if limit is not None else
+                    'blade acceleration (m/s², empty: no limit)')
     axis.set_xlabel('t (s)')
     axis.grid(alpha=0.3)
     _legend_above(axis, handles)

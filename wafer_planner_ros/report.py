@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from wafer_planner_ros.cell.limits import LOADED
+
 
 def plan_json(result, roadmap_info: dict, joint_names) -> dict:
     """Return a successful plan as the tools' JSON object (doc/operations.md, the tools)."""
@@ -11,7 +13,7 @@ def plan_json(result, roadmap_info: dict, joint_names) -> dict:
     return {
         'status': 'ok', 'code': 'OK',
         'message': '; '.join(result.warnings) or 'ok',
-        'from': result.start.label, 'to': result.goal.label,
+        'from': result.start.label, 'to': result.goal.label, 'load': result.load,
         'joint_names': list(joint_names),
         'cycle_time': result.cycle_time,
         'initial_cycle_time': result.initial_cycle_time,
@@ -36,10 +38,11 @@ def measured(result) -> dict:
                 proof_evaluations=proof.evaluations)
 
 
-def error_json(code: str, message: str, start, goal, roadmap_info: dict) -> dict:
+def error_json(code: str, message: str, start, goal, roadmap_info: dict,
+               load: str = LOADED) -> dict:
     """Return a failed request as the tools' JSON object (doc/operations.md, the tools)."""
     return {'status': 'error', 'code': code, 'message': message, 'from': _label(start),
-            'to': _label(goal), 'roadmap': roadmap_info}
+            'to': _label(goal), 'load': load, 'roadmap': roadmap_info}
 
 
 def roadmap_json(cached) -> dict:

@@ -6,7 +6,7 @@ The cell model: enclosure, robot, limits and stations, loaded and validated from
 :class:`CellError` naming the key path and the reason, never a half-built cell.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import functools
 import hashlib
 import json
@@ -18,6 +18,7 @@ import numpy as np
 
 from wafer_planner_ros.cell import schema
 from wafer_planner_ros.cell.document import read_cell_file, read_cell_yaml
+from wafer_planner_ros.cell.limits import EMPTY, LOADED
 from wafer_planner_ros.cell.robot import check_motion_times, read_robot, Robot
 from wafer_planner_ros.cell.stations import read_stations, Station
 from wafer_planner_ros.errors import CellError
@@ -93,6 +94,21 @@ class Cell:
         built.__dict__['clearance_model'] = model  # the validated model is the one used
         return built
 
+    def with_load(self, load: str) -> 'Cell':
+        """
+        Return the cell whose motions are planned against the limit set ``load``.
+
+        The geometry is this cell's, and so are its models (built here if not yet): the
+        empty blade is checked with the wafer disc's clearance, as the loaded one.
+        """
+        robot = self.robot.with_load(load)
+        if robot is self.robot:
+            return self
+        other = replace(self, robot=robot)
+        other.__dict__.update(clearance_model=self.clearance_model,
+                              port_model=self.port_model, motion_model=self.motion_model)
+        return other
+
     @functools.cached_property
     def clearance_model(self) -> ClearanceModel:
         """Return the vectorised collision/clearance model of this cell."""
@@ -118,6 +134,10 @@ class Cell:
     def canonical(self) -> dict:
         """Return the cell as plain data, independent of file layout, comments and order."""
         r = self.robot
+        loaded, empty = (r.limit_sets[name] for name in (LOADED, EMPTY))
+        raised = {key: getattr(empty.joints, key).tolist()
+                  for key in ('velocity', 'acceleration', 'jerk')
+                  if getattr(empty.joints, key) is not getattr(loaded.joints, key)}
         return {
             'name': self.name,
             'boundary': self.boundary.tolist(),
@@ -126,13 +146,15 @@ class Cell:
                 'base': r.base.tolist(), 'joint_names': list(r.joint_names),
                 'link_lengths': r.link_lengths.tolist(), 'link_radii': r.link_radii.tolist(),
                 'wafer_radius': r.wafer_radius,
-                'position': r.limits.position.tolist(), 'velocity': r.limits.velocity.tolist(),
-                'acceleration': r.limits.acceleration.tolist(),
-                'jerk': None if r.limits.jerk is None else r.limits.jerk.tolist(),
-                'wafer_acceleration_limit': r.wafer_acceleration_limit.tolist(),
-                'wafer_acceleration_norm_limit': r.wafer_acceleration_norm_limit,
-                # Only when set: cells without a margin keep their digest (and roadmaps).
+                'position': loaded.joints.position.tolist(),
+                'velocity': loaded.joints.velocity.tolist(),
+                'acceleration': loaded.joints.acceleration.tolist(),
+                'jerk': None if loaded.joints.jerk is None else loaded.joints.jerk.tolist(),
+                'wafer_acceleration_limit': loaded.wafer.xy.tolist(),
+                'wafer_acceleration_norm_limit': loaded.wafer.norm,
+                # Only when set: cells without them keep their digest (and roadmaps).
                 **({'clearance_margin': r.clearance_margin} if r.clearance_margin else {}),
+                **({'empty_joint_limits': raised} if raised else {}),
             },
             'stations': {name: dict(s.spec) for name, s in sorted(self.stations.items())},
         }

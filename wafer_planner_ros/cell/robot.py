@@ -1,12 +1,14 @@
-"""The robot of a cell: arm geometry, body radii, joint and wafer limits, read from YAML."""
+"""The robot of a cell: arm geometry, body radii, its limit sets, read from YAML."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import functools
-from typing import Optional, Tuple
+from typing import Mapping, Optional, Tuple
 
 import numpy as np
 
 from wafer_planner_ros.cell import schema
+from wafer_planner_ros.cell.limits import EMPTY, JointLimits, LimitSet, LOADED, LOADS
+from wafer_planner_ros.cell.limits import WaferLimit
 from wafer_planner_ros.errors import CellError
 from wafer_planner_ros.geometry.kinematics import PlanarArm
 from wafer_planner_ros.geometry.lipschitz import body_constants
@@ -14,49 +16,6 @@ from wafer_planner_ros.geometry.planar import points_in_polygon
 
 MAX_MOTION_TIME = 3600.0
 """s: a limit under which one motion across the cell would take longer is refused."""
-
-
-@dataclass(frozen=True, eq=False)
-class JointLimits:
-    """Joint limits, one row or entry per joint."""
-
-    position: np.ndarray
-    """(3, 2) lower/upper angle (rad)."""
-    velocity: np.ndarray
-    """(3,) rad/s."""
-    acceleration: np.ndarray
-    """(3,) rad/s^2."""
-    jerk: Optional[np.ndarray] = None
-    """(3,) rad/s^3, optional."""
-
-    def shortest_motion(self, displacement) -> np.ndarray:
-        """
-        Return each joint's shortest rest-to-rest time (s) over ``displacement`` (rad, (3,)).
-
-        The time-optimal profile of one joint alone under its velocity, acceleration and
-        jerk limits (jerk bang-bang, ramps of acceleration and a cruise where the distance
-        allows them): no motion between two configurations is faster than the largest of
-        these, whatever its path.
-        """
-        distance = np.abs(np.asarray(displacement, float))
-        v, a = self.velocity, self.acceleration
-        if self.jerk is None:
-            cruise = distance >= v * v / a
-            with np.errstate(divide='ignore', invalid='ignore'):
-                return np.where(cruise, distance / v + v / a, 2.0 * np.sqrt(distance / a))
-        j = self.jerk
-        ramp = a / j  # s: jerk takes the acceleration from 0 to its limit
-
-        def to_speed(u):  # s: from rest to speed u, fastest
-            return np.where(u >= a * ramp, u / a + ramp, 2.0 * np.sqrt(u / j))
-
-        # Without a cruise the motion peaks at the speed u with u * to_speed(u) = distance.
-        peak = 0.5 * a * (np.sqrt(ramp * ramp + 4.0 * distance / a) - ramp)
-        without_cruise = np.where(distance >= 2.0 * a * ramp * ramp, 2.0 * (peak / a + ramp),
-                                  4.0 * np.cbrt(distance / (2.0 * j)))
-        with np.errstate(divide='ignore', invalid='ignore'):
-            return np.where(distance >= v * to_speed(v), distance / v + to_speed(v),
-                            without_cruise)
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,13 +31,38 @@ class Robot:
     """Capsule radius of each link (m), (3,)."""
     wafer_radius: float
     """m."""
-    limits: JointLimits
-    wafer_acceleration_limit: np.ndarray
-    """Wafer-centre acceleration limit on x and y (m/s^2), (2,)."""
-    wafer_acceleration_norm_limit: Optional[float] = None
-    """Optional limit on the wafer-centre acceleration's magnitude (m/s^2)."""
+    limit_sets: Mapping[str, LimitSet]
+    """``LOADED`` and ``EMPTY`` (``cell.limits``)."""
     clearance_margin: float = 0.0
     """Distance (m) every body keeps from every wall and obstacle; 0: touching is the limit."""
+    load: str = LOADED
+    """The limit set motions of this robot are planned and verified against."""
+
+    @property
+    def limit_set(self) -> LimitSet:
+        """Return the limit set in use (``load``)."""
+        return self.limit_sets[self.load]
+
+    @property
+    def limits(self) -> JointLimits:
+        """Return the joint limits of the set in use."""
+        return self.limit_set.joints
+
+    @property
+    def wafer_limit(self) -> Optional[WaferLimit]:
+        """Return the wafer limit of the set in use (None: empty, no wafer limit)."""
+        return self.limit_set.wafer
+
+    def with_load(self, load: str) -> 'Robot':
+        """Return the robot planned against the limit set ``load``."""
+        if load not in self.limit_sets:
+            raise ValueError(f'unknown load {load!r}: one of {", ".join(LOADS)}')
+        return self if load == self.load else replace(self, load=load)
+
+    def with_limit_set(self, limit_set: LimitSet) -> 'Robot':
+        """Return the robot with ``limit_set`` in place of the set of its name, in use."""
+        return replace(self, limit_sets={**self.limit_sets, limit_set.name: limit_set},
+                       load=limit_set.name)
 
     @functools.cached_property
     def arm(self) -> PlanarArm:
@@ -118,7 +102,7 @@ def read_robot(value, boundary, obstacles) -> Robot:
     r = schema.mapping(value, 'robot', required=(
         'base', 'joint_names', 'link_lengths', 'link_radii', 'wafer_radius', 'joint_limits',
         'wafer_acceleration_limit'), optional=('wafer_acceleration_norm_limit',
-                                               'clearance_margin'))
+                                               'empty_joint_limits', 'clearance_margin'))
     base = schema.vector(r['base'], 'robot.base', 2)
     schema.coordinates(base, 'robot.base')
     if not points_in_polygon(base, boundary) or any(
@@ -131,7 +115,6 @@ def read_robot(value, boundary, obstacles) -> Robot:
     names = tuple(schema.text(n, f'robot.joint_names[{i}]') for i, n in enumerate(names))
     if len(set(names)) != 3:
         raise CellError('robot.joint_names', f'must be unique, got {schema.brief(list(names))}')
-    norm = r.get('wafer_acceleration_norm_limit')
     margin = schema.number(r.get('clearance_margin', 0.0), 'robot.clearance_margin')
     if margin < 0.0:
         raise CellError('robot.clearance_margin', f'must be >= 0, got {margin!r}')
@@ -144,11 +127,7 @@ def read_robot(value, boundary, obstacles) -> Robot:
         wafer_radius=float(schema.coordinates(schema.number(
             r['wafer_radius'], 'robot.wafer_radius', positive=True), 'robot.wafer_radius',
             'larger than')),
-        limits=_limits(r['joint_limits']),
-        wafer_acceleration_limit=schema.vector(
-            r['wafer_acceleration_limit'], 'robot.wafer_acceleration_limit', 2, positive=True),
-        wafer_acceleration_norm_limit=None if norm is None else schema.number(
-            norm, 'robot.wafer_acceleration_norm_limit', positive=True),
+        limit_sets=_limit_sets(r),
         clearance_margin=float(schema.coordinates(margin, 'robot.clearance_margin',
                                                   'larger than')))
 
@@ -162,8 +141,15 @@ def check_motion_times(robot: Robot, boundary: np.ndarray) -> None:
     full turn, whichever is less; the wafer's the diagonal of the enclosure's bounding box
     or the arm's reach across, whichever is less. A denormal or zero-like limit would
     otherwise reach the optimiser and the dense checks as a meaningless million-year motion.
+    Both limit sets are checked.
     """
-    limits = robot.limits
+    for limit_set in robot.limit_sets.values():
+        _check_motion_times(robot, limit_set, boundary)
+
+
+def _check_motion_times(robot: Robot, limit_set: LimitSet, boundary: np.ndarray) -> None:
+    limits = limit_set.joints
+    key = 'joint_limits' if limit_set.name == LOADED else 'empty_joint_limits'
     ranges = np.minimum(limits.position[:, 1] - limits.position[:, 0], 2.0 * np.pi)
     span = min(float(np.hypot(*np.ptp(boundary, axis=0))), 2.0 * robot.link_lengths.sum())
     checks = [('velocity', 'rad/s', limits.velocity, ranges, lambda d, v: d / v),
@@ -172,11 +158,10 @@ def check_motion_times(robot: Robot, boundary: np.ndarray) -> None:
     if limits.jerk is not None:
         checks.append(('jerk', 'rad/s^3', limits.jerk, ranges,
                        lambda d, j: np.cbrt(32.0 * d / j)))
-    wafer = robot.wafer_acceleration_limit
-    if robot.wafer_acceleration_norm_limit is not None:
-        wafer = np.append(wafer, robot.wafer_acceleration_norm_limit)
-    checks.append(('wafer', 'm/s^2', wafer, np.full(len(wafer), span),
-                   lambda d, a: 2.0 * np.sqrt(d / a)))
+    if limit_set.wafer is not None:
+        wafer = limit_set.wafer.values
+        checks.append(('wafer', 'm/s^2', wafer, np.full(len(wafer), span),
+                       lambda d, a: 2.0 * np.sqrt(d / a)))
     for kind, unit, values, distances, bound in checks:
         with np.errstate(over='ignore'):
             times = bound(distances, values)
@@ -187,11 +172,36 @@ def check_motion_times(robot: Robot, boundary: np.ndarray) -> None:
                 path += f'[{i}]' if i < 2 else ''
                 what = f'moving the wafer by {distances[i]:.3g} m'
             else:
-                path = f'robot.joint_limits.{kind}[{i}]'
+                path = f'robot.{key}.{kind}[{i}]'
                 what = f'moving joint {robot.joint_names[i]} by {distances[i]:.3g} rad'
             raise CellError(path, f'{values[i]:.3g} {unit} is too small: {what} would take '
                                   f'at least {times[i]:.3g} s (more than '
                                   f'{MAX_MOTION_TIME:.0f} s)')
+
+
+def _limit_sets(r: dict) -> dict:
+    """
+    Return the ``LOADED`` and ``EMPTY`` limit sets of the ``robot`` section.
+
+    Loaded: ``joint_limits`` and the wafer limits. Empty: ``empty_joint_limits``'
+    velocity, acceleration and jerk, each the loaded one where it is not given (the
+    position range is the arm's, loaded or not), and no wafer limit.
+    """
+    loaded = _limits(r['joint_limits'])
+    norm = r.get('wafer_acceleration_norm_limit')
+    wafer = WaferLimit(
+        xy=schema.vector(r['wafer_acceleration_limit'], 'robot.wafer_acceleration_limit', 2,
+                         positive=True),
+        norm=None if norm is None else schema.number(
+            norm, 'robot.wafer_acceleration_norm_limit', positive=True))
+    path = 'robot.empty_joint_limits'
+    empty = r.get('empty_joint_limits')  # None: the key with every entry commented out
+    empty = schema.mapping({} if empty is None else empty, path,
+                           optional=('velocity', 'acceleration', 'jerk'))
+    given = {key: schema.vector(value, f'{path}.{key}', 3, positive=True)
+             for key, value in empty.items()}
+    return {LOADED: LimitSet(LOADED, loaded, wafer),
+            EMPTY: LimitSet(EMPTY, replace(loaded, **given), None)}
 
 
 def _limits(value) -> JointLimits:

@@ -16,6 +16,7 @@ import os
 import sys
 import time
 
+from wafer_planner_ros.cell.limits import LOADED, LOADS
 from wafer_planner_ros.cli import summary
 from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, run
 from wafer_planner_ros.node.client import ask_planner
@@ -35,6 +36,9 @@ def main(argv=None) -> int:
                              '(default: 30)')
     parser.add_argument('--node', default='/wafer_planner',
                         help='the planner node (default: /wafer_planner)')
+    parser.add_argument('--load', choices=LOADS, default=LOADED,
+                        help='loaded (the default: the wafer limit holds) or empty (joint '
+                        'limits only: an empty move with a wafer on the blade can slide it)')
     parser.add_argument('--raw', action='store_true',
                         help="print every value of the node's result as it was sent")
     args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
@@ -44,8 +48,10 @@ def main(argv=None) -> int:
         parser.error(str(exc))
     node = args.node if args.node.startswith('/') else f'/{args.node}'
     request_id = args.id or f'client-{os.getpid()}-{int(time.time() * 1000)}'
-    answer = ask_planner(node, {'id': request_id, 'from': ends[0], 'to': ends[1]},
-                         args.timeout, lambda text: print(text, file=sys.stderr))
+    request = {'id': request_id, 'from': ends[0], 'to': ends[1]}
+    if args.load != LOADED:
+        request['load'] = args.load
+    answer = ask_planner(node, request, args.timeout, lambda text: print(text, file=sys.stderr))
     if answer is None:
         print(f'{request_id}: no answer from {node} within {args.timeout:g} s',
               file=sys.stderr)
@@ -70,6 +76,8 @@ def described(values: dict) -> list:
         line = summary.cycle_text(number['cycle_time'], number.get('initial_cycle_time'))
         if 'branches' in values:
             line += f", {summary.branches_text(summary.branches(values['branches']))}"
+        if values.get('load', LOADED) != LOADED:
+            line += f", {values['load']}"
         line += f" ({values.get('method') or 'planned'}, {_source(values.get('source', ''))})"
         lines.append(line)
     if number.get('min_clearance') is not None:

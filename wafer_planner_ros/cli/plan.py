@@ -5,6 +5,7 @@ from dataclasses import replace
 from pathlib import Path
 import sys
 
+from wafer_planner_ros.cell.limits import LOADED, LOADS
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.cli import summary
 from wafer_planner_ros.cli.common import add_roadmap_options, EXIT_FAILURE, EXIT_OK
@@ -13,6 +14,7 @@ from wafer_planner_ros.cli.common import write_json
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import error_json, plan_json, roadmap_json
+from wafer_planner_ros.service.cycle import loadport_loadlock_pairs, swap_cycle
 from wafer_planner_ros.service.planning import PlanningService
 from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
 from wafer_planner_ros.service.table import load_or_build_table, load_table, TableError
@@ -27,22 +29,26 @@ def parse_end(text: str):
         raise UsageError(str(exc)) from None
 
 
-def plan_one(planner, start, goal, info, joint_names, stations=None) -> tuple:
+def plan_one(planner, start, goal, info, joint_names, stations=None,
+             load: str = LOADED) -> tuple:
     """
     Return (result or None, JSON object) for one request; from ``stations`` if it has it.
+
+    ``load``: the limit set (``Planner.plan``); the station table holds loaded moves.
 
     A pair whose stored entry the table rejected on load is never answered from the file:
     it is planned, with a warning on stderr naming it and why.
     """
-    if stations is not None and isinstance(start, str) and isinstance(goal, str):
+    if stations is not None and isinstance(start, str) and isinstance(goal, str) \
+            and load == LOADED:
         rejected = stations.rejected.get((start, goal))
         if rejected is not None:
             print(f'warning: station table: {start} -> {goal} rejected ({rejected}); '
                   'planned again', file=sys.stderr)
     try:
-        result = PlanningService(planner, stations).answer(start, goal)
+        result = PlanningService(planner, stations).answer(start, goal, load=load)
     except PlanningError as exc:
-        return None, error_json(exc.code.value, exc.message, start, goal, info)
+        return None, error_json(exc.code.value, exc.message, start, goal, info, load)
     return result, plan_json(result, info, joint_names)
 
 
@@ -82,12 +88,13 @@ def table(rows: list) -> str:
             lines.append(f"{pair:<24}{row['code']}: {row['message']}")
             continue
         m, r = row['metrics'], row['metrics']['limit_ratios']
-        wafer = max(v for k, v in r.items() if k.startswith('wafer'))
+        wafer = max((v for k, v in r.items() if k.startswith('wafer')), default=None)
         lines.append(
             f"{pair:<24}{'ok':<8}{row['cycle_time']:>8.3f}{row['initial_cycle_time']:>11.3f}"
             f"{1 - row['cycle_time'] / row['initial_cycle_time']:>7.0%}"
             f"{m['joint_path_length']:>9.2f}{m['min_clearance'] * 1000:>9.1f}"
-            f"{r['velocity']:>6.2f}{r['acceleration']:>6.2f}{wafer:>7.3f}"
+            f"{r['velocity']:>6.2f}{r['acceleration']:>6.2f}"
+            f"{'-' if wafer is None else f'{wafer:.3f}':>7}"
             f"{max(m['peak_jerk']):>12.0f}{row['timings_ms']['total']:>9.1f}")
     return '\n'.join(lines)
 
@@ -99,6 +106,10 @@ def main(argv=None) -> int:
     parser.add_argument('goal', nargs='?', metavar='TO', help='station name or q1,q2,q3')
     parser.add_argument('--all-pairs', action='store_true',
                         help='plan every loadport->loadlock and loadlock->loadport pair')
+    parser.add_argument('--cycle', action='store_true',
+                        help='the single-blade swap cycle of every loadport/loadlock pair '
+                        '(loaded out, empty back, port to port, non-stop) against the same '
+                        'cycle as stop-and-go moves at the loaded limits')
     add_roadmap_options(parser)
     parser.add_argument('--sample-period', type=float, default=0.01,
                         help='seconds between returned samples (default: %(default)s)')
@@ -109,28 +120,42 @@ def main(argv=None) -> int:
                         'and proven (default; seconds per station pair, answered from the '
                         'station table once it is stored), or the corridor curve with '
                         'optimised knot times (milliseconds; the default with --paper)')
+    parser.add_argument('--load', choices=LOADS, default=LOADED,
+                        help='the limit set: loaded (a wafer on the blade, the wafer limit '
+                        'holds; the default) or empty (joint limits only: an empty move '
+                        'with a wafer on the blade can slide it)')
     parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
     parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
     args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
-    if args.all_pairs == (args.start is not None):
-        raise UsageError('give FROM and TO, or --all-pairs')
-    if not args.all_pairs and args.goal is None:
+    if args.all_pairs and args.cycle:
+        raise UsageError('give --all-pairs or --cycle, not both')
+    several = args.all_pairs or args.cycle
+    if several == (args.start is not None):
+        raise UsageError('give FROM and TO, --all-pairs or --cycle')
+    if not several and args.goal is None:
         raise UsageError('give both FROM and TO')
+    if args.cycle and args.load != LOADED:
+        raise UsageError('--cycle plans its own loads (loaded out, empty back): no --load')
     try:
         settings = replace((PlannerSettings.paper if args.paper else PlannerSettings)(
             sample_period=args.sample_period), method=args.method or (
                 KnotTiming if args.paper else WholeCurve))
     except ValueError as exc:
         raise UsageError(f'--sample-period: {exc}') from None
-    requests = None if args.all_pairs else [(parse_end(args.start), parse_end(args.goal))]
+    requests = None if several else [(parse_end(args.start), parse_end(args.goal))]
     cell = load_cell(args)
     cached = roadmap_for(args, cell, quiet=args.json == '-')
     planner = Planner(cell, cached.roadmap, settings)
+    if args.cycle:
+        return _cycles(args, cell, planner)
     info = roadmap_json(cached)
     results, rows = [], []
-    stations = station_table(args, planner, quiet=args.json == '-')
+    # The station table holds loaded moves: empty ones are planned.
+    stations = station_table(args, planner, quiet=args.json == '-') \
+        if args.load == LOADED else None
     for start, goal in requests or station_pairs(cell):
-        result, row = plan_one(planner, start, goal, info, cell.robot.joint_names, stations)
+        result, row = plan_one(planner, start, goal, info, cell.robot.joint_names, stations,
+                               args.load)
         results.append(result)
         rows.append(row)
     if args.json:
@@ -142,11 +167,65 @@ def main(argv=None) -> int:
     return EXIT_OK if all(r['status'] == 'ok' for r in rows) else EXIT_FAILURE
 
 
+def _cycles(args, cell, planner) -> int:
+    """Plan, print and write the swap cycle of every loadport/loadlock pair with ports."""
+    pairs = loadport_loadlock_pairs(cell)
+    if not pairs:
+        raise UsageError(f'--cycle: cell {cell.name} has no loadport and loadlock with a port')
+    quiet = args.json == '-'
+    progress = None if quiet else Progress('planning the swap cycles',
+                                           text='{done}/{total} pairs ({extra})')
+    cycles = []
+    for done, (loadport, loadlock) in enumerate(pairs):
+        if progress is not None:
+            progress(done, len(pairs), f'{loadport} <-> {loadlock}')
+        cycles.append(swap_cycle(planner, loadport, loadlock))
+    if progress is not None:
+        progress.done()
+    rows = [c.row() for c in cycles]
+    if args.json:
+        write_json(rows, args.json)
+    if not quiet:
+        print(cycle_table(cycles))
+    if args.plot:
+        from wafer_planner_ros.plotting import plot_cycle
+        shown = next((c for c in cycles if c.cycle is not None), None)
+        if shown is not None:
+            plot_cycle(cell, shown, Path(args.plot))
+            print(f'plot: {args.plot} ({shown.loadport} <-> {shown.loadlock})',
+                  file=sys.stderr)
+    return EXIT_OK if all(c.cycle is not None and c.stop_and_go is not None
+                          for c in cycles) else EXIT_FAILURE
+
+
+def cycle_table(cycles) -> str:
+    """Return the --cycle table: seconds of motion and wafers per hour, each way of moving."""
+    lines = [f"{'pair':<24}{'non-stop s/wafer':>17}{'wafers/h':>9}{'stop-and-go s/wafer':>20}"
+             f"{'wafers/h':>9}{'gain':>7}"]
+
+    def figure(value, width, form):
+        return f"{'-' if value is None else format(value, form):>{width}}"
+
+    for c in cycles:
+        row = c.row()
+        lines.append(f'{c.loadport + " <-> " + c.loadlock:<24}'
+                     f"{figure(row['cycle'], 17, '.3f')}{figure(row['wafers_per_hour'], 9, '.0f')}"
+                     f"{figure(row['stop_and_go'], 20, '.3f')}"
+                     f"{figure(row['stop_and_go_wafers_per_hour'], 9, '.0f')}"
+                     f"{figure(row['gain'], 7, '.2f')}")
+        lines += [f'  {m.start} -> {m.goal} ({m.load}): {m.error}' for m in c.moves
+                  if m.error]
+        if c.stop_and_go is None:
+            lines += [f'  stop-and-go: {e}' for e in c.stop_and_go_errors]
+    return '\n'.join(lines)
+
+
 def _summary(row: dict) -> str:
     if row['status'] != 'ok':
         return f"{row['from']} -> {row['to']}: {row['code']}: {row['message']}"
     m = row['metrics']
-    return (f"{row['from']} -> {row['to']}: ok, "
+    load = '' if row['load'] == LOADED else f", {row['load']}"
+    return (f"{row['from']} -> {row['to']}{load}: ok, "
             f"{summary.cycle_text(row['cycle_time'], row['initial_cycle_time'])}, "
             f"{summary.branches_text(m['branches'])}\n"
             f"  path {m['path_vertices']} vertices ({m['roadmap_path_vertices']} in the "

@@ -99,7 +99,8 @@ class Replayer:
                 return '', None
             planner = self.planner(query)
             request = request_of(query.kind, query.request, planner.cell.robot.joint_names)
-            result = PlanningService(planner).answer(request.start, request.goal)
+            result = PlanningService(planner).answer(request.start, request.goal,
+                                                     load=request.load)
         except (RequestError, PlanningError) as exc:
             return exc.code.value, None
         return OK, result.cycle_time

@@ -75,6 +75,7 @@ def plan_values(result, roadmap, start, goal) -> dict:
     values['peak_wafer_jerk'] = result.verification.peak_wafer_jerk
     values['certified'] = result.verification.proof.certified
     values['branches'] = result.branches
+    values['load'] = result.load
     values['method'] = result.metrics.get('method', '')
     values['source'] = result.metrics.get('source', 'planned')
     values['budget'] = result.metrics.get('budget', 0.0)

@@ -146,8 +146,9 @@ class PlanningWorker:
             settings = self._settings()
             with self.lock:
                 serving = self._serving
-                waiting = None if serving is None else self._lane \
-                    if serving.service.holds(request.start, request.goal) else self._backlog
+                held = serving is not None and serving.service.holds(
+                    request.start, request.goal, request.load)
+                waiting = None if serving is None else self._lane if held else self._backlog
                 if waiting is None:
                     code, message = ErrorCode.ROADMAP_NOT_READY, f'not ready: {self._not_ready()}'
                 elif self._waiting(waiting) >= settings.max_queue:
@@ -371,7 +372,7 @@ class PlanningWorker:
                 return
             begun = time.monotonic()
             try:
-                result = service.answer(request.start, request.goal, deadline)
+                result = service.answer(request.start, request.goal, deadline, request.load)
             except PlanningError as exc:
                 self._answer_error(number, request, exc.code, exc.message,
                                    (time.monotonic() - begun) * 1000.0, roadmap)

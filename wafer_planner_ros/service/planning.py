@@ -29,6 +29,7 @@ from dataclasses import replace
 import time
 from typing import Mapping, Optional, Type
 
+from wafer_planner_ros.cell.limits import LOADED
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.service.table import StationTable
 from wafer_planner_ros.trajectory.methods import CurveMethod, KnotTiming, WholeCurve
@@ -50,15 +51,15 @@ class PlanningService:
         """The station table (None: none, or not yet planned); it may be set at any time
         (the node sets it once the table is planned)."""
 
-    def holds(self, start, goal) -> bool:
+    def holds(self, start, goal, load: str = LOADED) -> bool:
         """Return whether the station table answers ``start`` to ``goal`` (at once)."""
-        return self._holding(start, goal) is not None
+        return self._holding(start, goal, load) is not None
 
-    def _holding(self, start, goal) -> Optional[StationTable]:
+    def _holding(self, start, goal, load: str) -> Optional[StationTable]:
         """Return the station table if it holds ``start`` to ``goal``, else None."""
         table = self.table  # read once: it may be set meanwhile
         held = table is not None and isinstance(start, str) and isinstance(goal, str) \
-            and (start, goal) in table.entries
+            and load == LOADED and (start, goal) in table.entries
         return table if held else None
 
     def using(self, budget: Optional[float], sample_period: float) -> 'PlanningService':
@@ -69,23 +70,27 @@ class PlanningService:
                               replace(planner.settings, sample_period=sample_period))
         return PlanningService(planner, self.table, budget)
 
-    def answer(self, start, goal, deadline: Optional[float] = None) -> PlanResult:
+    def answer(self, start, goal, deadline: Optional[float] = None,
+               load: str = LOADED) -> PlanResult:
         """
         Return the verified answer from ``start`` to ``goal`` (stations or joint angles).
 
         ``deadline``: a ``time.monotonic()`` instant after which planning gives up with
-        TIMEOUT. Raises PlanningError with the code of the first reason it cannot answer.
+        TIMEOUT. ``load``: the limit set (``Planner.plan``); the station table holds loaded
+        moves. Raises PlanningError with the code of the first reason it cannot answer.
         """
-        table = self._holding(start, goal)
+        table = self._holding(start, goal, load)
         if table is not None:
             return table.answer(self.planner, start, goal)
         if self.budget is None:
-            return self.planner.plan(start, goal, deadline=deadline)
+            return self.planner.plan(start, goal, deadline=deadline, load=load)
         budget = self.budget if deadline is None else \
             min(self.budget, 0.5 * (deadline - time.monotonic()))
         if budget < MIN_BUDGET:
-            return _with_method(self.planner, KnotTiming).plan(start, goal, deadline=deadline)
-        result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget)
+            return _with_method(self.planner, KnotTiming).plan(start, goal, deadline=deadline,
+                                                               load=load)
+        result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget,
+                                                load=load)
         return replace(result, metrics=dict(result.metrics, budget=budget))
 
 

@@ -2,13 +2,16 @@
 Plan requests as the node receives them, read into plain values (ROS-free).
 
 A joint request is a JointTrajectory (``header.frame_id`` = id, two points, positions in
-``joint_names`` order or the robot's when the names are empty); a station request is a JSON
-object ``{"id": "r17", "from": "loadport2", "to": "loadlock1"}`` (no other keys) whose ends
-may also be three joint angles. Anything else raises ``RequestError`` with the error code and
-a sentence naming what is wrong, never longer than a few hundred characters whatever the
-request holds: every number is checked to be one a float holds (``NOT_FINITE`` otherwise,
-naming the field), and the JSON reader itself can only fail with ``INVALID_REQUEST``. The
-planner then checks the values themselves (limits, collision, known station).
+``joint_names`` order or the robot's when the names are empty), always planned loaded; a
+station request is a JSON object ``{"id": "r17", "from": "loadport2", "to": "loadlock1"}``
+whose ends may also be three joint angles, with an optional ``"load"``: ``"loaded"`` (the
+default: the wafer limit holds) or ``"empty"`` (no wafer on the blade: joint limits only),
+and no other keys. An empty move of a joint request is a station request with joint angles.
+Anything else raises ``RequestError`` with the error code and a sentence naming what is
+wrong, never longer than a few hundred characters whatever the request holds: every number
+is checked to be one a float holds (``NOT_FINITE`` otherwise, naming the field), and the
+JSON reader itself can only fail with ``INVALID_REQUEST``. The planner then checks the
+values themselves (limits, collision, known station).
 """
 
 from dataclasses import dataclass
@@ -18,6 +21,7 @@ from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from wafer_planner_ros.cell.limits import LOADED, LOADS
 from wafer_planner_ros.errors import ErrorCode
 
 MAX_TEXT = 65536
@@ -28,8 +32,8 @@ MAX_NAME = 256
 """Longest station name (characters) read."""
 QUOTE = 200
 """Most characters of a request's value that an error message quotes."""
-KEYS = ('id', 'from', 'to')
-"""The keys of a station request."""
+KEYS = ('id', 'from', 'to', 'load')
+"""The keys of a station request (``load`` optional)."""
 
 End = Union[str, np.ndarray]
 
@@ -43,6 +47,8 @@ class Request:
     goal: End
     read_for: Tuple[str, ...] = ()
     """The robot's joint names the ends were read against (ordered, counted); () if none."""
+    load: str = LOADED
+    """The limit set to plan against (``cell.limits``): loaded unless the request says."""
 
 
 class RequestError(Exception):
@@ -157,14 +163,19 @@ def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
         # Refused, not ignored: a key the planner does not read would look obeyed.
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request has unknown keys {quote(unknown)}; a station request '
-                           'has only "id", "from" and "to"', request_id)
+                           'has only "id", "from", "to" and "load"', request_id)
     ends = []
     for key in ('from', 'to'):
         if key not in data:
             raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
                                request_id)
         ends.append(_end(data[key], key, request_id, robot_joints))
-    return Request(request_id, ends[0], ends[1], tuple(robot_joints))
+    load = data.get('load', LOADED)
+    if load not in LOADS:
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"load" must be one of {quote(list(LOADS))}, got {quote(load)}',
+                           request_id)
+    return Request(request_id, ends[0], ends[1], tuple(robot_joints), load)
 
 
 def quote(value, limit: int = QUOTE) -> str:

@@ -483,8 +483,9 @@ def _result(planner: Planner, pair, entry: dict, verification: Verification,
     start_q, goal_q = trajectory.evaluate([0.0, trajectory.duration])
     return PlanResult(
         start=start, goal=goal, start_q=start_q, goal_q=goal_q, branches=tuple(branches),
-        trajectory=trajectory, initial_cycle_time=described['initial_cycle_time'],
-        verification=verification, times=times, positions=positions, velocities=velocities,
+        load=planner.load, trajectory=trajectory,
+        initial_cycle_time=described['initial_cycle_time'], verification=verification,
+        times=times, positions=positions, velocities=velocities,
         accelerations=accelerations, roadmap_path=described['roadmap_path'],
         path=described['path'], metrics=metrics, warnings=described['warnings'])
 

@@ -52,13 +52,11 @@ class ShapeProblem:
         self.start = refine(start, shape.min_spans)
         self.count = len(self.start.control_points)
         self.spans = self.count - DEGREE
-        limits = self.robot.limits
-        orders = [limits.velocity, limits.acceleration] + (
-            [limits.jerk] if limits.jerk is not None else [])
-        self._control_limits = timing.margin * np.array(orders, float)
-        wafer = self.robot.wafer_acceleration_limit
-        self._wafer_limits = timing.margin * np.array(
-            [wafer[0], wafer[1], self.robot.wafer_acceleration_norm_limit or 0.0])
+        self._control_limits = self.robot.limits.rows(timing.margin)
+        wafer = self.robot.wafer_limit
+        self.wafer_limited = wafer is not None
+        """Whether the wafer limit applies (loaded): if not, wafer samples have no rows."""
+        self._wafer_limits = wafer.rows(timing.margin) if wafer else np.zeros(3)
         self.min_interval = timing.shortest(self.robot)
         self.fixed = np.zeros(self.count, dtype=bool)
         self.fixed[:DEGREE] = self.fixed[-DEGREE:] = True
@@ -97,6 +95,8 @@ class ShapeProblem:
         scale = np.ascontiguousarray(scale, float)
         padded = np.concatenate([np.zeros(DEGREE), intervals, np.zeros(DEGREE)])
         (wafer_span, wafer_fraction), (span, fraction, body, kept) = wafer, clearance
+        if not self.wafer_limited:
+            wafer_span = wafer_span[:0]
         parts = 3 if self._wafer_limits[2] > 0.0 else 2
         control = control_row_count(self.count, len(self._control_limits))
         rows = control + parts * len(wafer_span) + len(span)

@@ -63,22 +63,20 @@ class TimingProblem:
         self.spans = len(self.points) - DEGREE
         self.robot = robot
         self.arm = robot.arm
+        self.limit_set = robot.limit_set
         self.limits = robot.limits
-        self.wafer = robot.wafer_acceleration_limit
-        self.wafer_norm = robot.wafer_acceleration_norm_limit
-        # Velocity, acceleration (, jerk) limits and x, y, |a| wafer limits with the margin
-        # (0: no |a| limit).
-        orders = [self.limits.velocity, self.limits.acceleration]
-        if self.limits.jerk is not None:
-            orders.append(self.limits.jerk)
-        self._control_limits = settings.margin * np.array(orders, float)
-        self._wafer_limits = settings.margin * np.array([self.wafer[0], self.wafer[1],
-                                                         self.wafer_norm or 0.0])
+        self._control_limits = self.limits.rows(settings.margin)
+        wafer = self.limit_set.wafer
+        self.wafer_limited = wafer is not None
+        """Whether the wafer limit applies (loaded): if not, samples have no rows."""
+        self._wafer_limits = wafer.rows(settings.margin) if wafer else np.zeros(3)
         self._fixed = -np.ones((len(self.points), 3), np.int64)  # no control point moves
 
     def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
         """Return the samples at ``fraction`` (0..1) of the given spans."""
-        return Samples(span=np.asarray(span, np.int64), fraction=np.asarray(fraction, float))
+        keep = slice(None) if self.wafer_limited else slice(0)
+        return Samples(span=np.asarray(span, np.int64)[keep],
+                       fraction=np.asarray(fraction, float)[keep])
 
     def derivatives(self, intervals) -> tuple:
         """
@@ -152,11 +150,10 @@ class TimingProblem:
         span, fraction = dense_grid(intervals, self.settings.dense_step)
         spline = CubicBSpline.from_intervals(self.points, intervals)
         t = spline.knots[span + DEGREE] + intervals[span] * fraction
+        if not self.wafer_limited:
+            return np.zeros(len(span)), span, fraction
         ax, ay = self.arm.wafer_acceleration_xy(*spline.evaluate_orders(t))
-        ratio = np.maximum(np.abs(ax) / self.wafer[0], np.abs(ay) / self.wafer[1])
-        if self.wafer_norm is not None:
-            ratio = np.maximum(ratio, np.hypot(ax, ay) / self.wafer_norm)
-        return ratio, span, fraction
+        return self.limit_set.wafer_ratio(ax, ay), span, fraction
 
     def scale_factor(self, intervals: np.ndarray, wafer_ratio=None) -> float:
         """

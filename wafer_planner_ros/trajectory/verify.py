@@ -130,10 +130,6 @@ def port_deviation(model, q: np.ndarray) -> tuple:
     return ratios, '' if told is None else f' ({told})'
 
 
-def _ratio(values: np.ndarray, limit) -> float:
-    return float(np.max(np.abs(values) / limit))
-
-
 def dense_clearance(trajectory: Trajectory, model) -> tuple:
     """Return (smallest clearance, checks) at the times of ``collision_times``."""
     q = trajectory.evaluate(collision_times(trajectory))
@@ -183,20 +179,8 @@ def limit_states(trajectory: Trajectory, robot) -> tuple:
 
 
 def state_ratios(robot, qd, qdd, qddd, wafer) -> dict:
-    """Return the largest |value| / limit of each of ``robot``'s limits over the states."""
-    limits = robot.limits
-    ratios = {
-        'velocity': _ratio(qd, limits.velocity),
-        'acceleration': _ratio(qdd, limits.acceleration),
-        'wafer_x': _ratio(wafer[:, 0], robot.wafer_acceleration_limit[0]),
-        'wafer_y': _ratio(wafer[:, 1], robot.wafer_acceleration_limit[1]),
-    }
-    if limits.jerk is not None:
-        ratios['jerk'] = _ratio(qddd, limits.jerk)
-    if robot.wafer_acceleration_norm_limit is not None:
-        ratios['wafer_norm'] = float(np.max(np.hypot(wafer[:, 0], wafer[:, 1]))
-                                     / robot.wafer_acceleration_norm_limit)
-    return ratios
+    """Return the largest |value| / limit of each limit of ``robot``'s set in use."""
+    return robot.limit_set.ratios(qd, qdd, qddd, wafer)
 
 
 def limit_ratios(trajectory: Trajectory, robot) -> dict:

@@ -1,0 +1,160 @@
+"""
+The cycle a fab buys: a single-blade swap between a loadport and a loadlock.
+
+Per wafer the blade makes two moves, port to port: ``<loadport>:inside`` ->
+``<loadlock>:inside`` loaded (the wafer from its FOUP into the loadlock), then
+``<loadlock>:inside`` -> ``<loadport>:inside`` empty (back for the next wafer). Each is one
+non-stop move (``Planner.plan``); the way back is planned on the elbow branches the way out
+ended and started on, so that the cycle repeats.
+
+It is compared with the same cycle as a controller without non-stop moves or an empty
+limit set makes it: each way a retract (``<station>:inside`` -> ``<station>``), a transfer
+between the retracted poses and an extend (``<station>`` -> ``<station>:inside``), each
+from rest to rest and loaded, on one elbow branch per station (the retract ends where the
+transfer starts): the fastest such chain of the six moves.
+
+Both are reported in seconds of motion per wafer, with wafers per hour of motion
+(3600 / seconds: the robot's motion alone, without the stations' own times) and the gain
+(stop-and-go / cycle: how many more wafers an hour).
+"""
+
+from dataclasses import dataclass
+import itertools
+from typing import Callable, Optional, Tuple
+
+from wafer_planner_ros.cell.limits import EMPTY, LOADED
+from wafer_planner_ros.cell.stations import INSIDE
+from wafer_planner_ros.errors import PlanningError
+from wafer_planner_ros.planner import Planner, PlanResult
+
+SECONDS_PER_HOUR = 3600.0
+
+
+@dataclass(frozen=True, eq=False)
+class Move:
+    """One move of a cycle: its ends, limit set and elbow branches, and how it went."""
+
+    start: str
+    goal: str
+    load: str
+    branches: Tuple[Optional[int], Optional[int]]
+    """The elbow branches it was planned on (None: any)."""
+    result: Optional[PlanResult] = None
+    error: str = ''
+    """The code and the sentence when it could not be planned."""
+
+    @property
+    def cycle_time(self) -> Optional[float]:
+        """Return its duration (s), None when it failed."""
+        return None if self.result is None else self.result.cycle_time
+
+    def row(self) -> dict:
+        """Return the move as JSON data."""
+        return {'from': self.start, 'to': self.goal, 'load': self.load,
+                'branches': list(self.result.branches if self.result else self.branches),
+                'cycle_time': self.cycle_time, 'error': self.error}
+
+
+@dataclass(frozen=True, eq=False)
+class SwapCycle:
+    """The swap cycle of one loadport/loadlock pair, and its stop-and-go counterpart."""
+
+    loadport: str
+    loadlock: str
+    moves: Tuple[Move, ...]
+    """Non-stop: loaded out, empty back (the way back absent when the way out failed)."""
+    stop_and_go_moves: Tuple[Move, ...]
+    """The fastest chain of six (empty when no chain could be planned in full)."""
+    stop_and_go_errors: Tuple[str, ...] = ()
+    """Why each chain that failed did (elbow branches, then the move's error)."""
+
+    @property
+    def cycle(self) -> Optional[float]:
+        """Return the non-stop cycle's seconds of motion per wafer (None: a move failed)."""
+        return _total(self.moves, 2)
+
+    @property
+    def stop_and_go(self) -> Optional[float]:
+        """Return the stop-and-go cycle's seconds of motion per wafer (None: none planned)."""
+        return _total(self.stop_and_go_moves, 6)
+
+    @property
+    def gain(self) -> Optional[float]:
+        """Return stop-and-go / non-stop: wafers per hour of motion, non-stop over stop-and-go."""
+        if self.cycle is None or self.stop_and_go is None:
+            return None
+        return self.stop_and_go / self.cycle
+
+    def row(self) -> dict:
+        """Return the cycle as JSON data (``wafer-plan --cycle --json``)."""
+        return {'loadport': self.loadport, 'loadlock': self.loadlock,
+                'cycle': self.cycle, 'wafers_per_hour': _per_hour(self.cycle),
+                'stop_and_go': self.stop_and_go,
+                'stop_and_go_wafers_per_hour': _per_hour(self.stop_and_go),
+                'gain': self.gain, 'moves': [m.row() for m in self.moves],
+                'stop_and_go_moves': [m.row() for m in self.stop_and_go_moves],
+                'stop_and_go_errors': list(self.stop_and_go_errors)}
+
+
+def swap_cycle(planner: Planner, loadport: str, loadlock: str,
+               plan: Optional[Callable[..., PlanResult]] = None) -> SwapCycle:
+    """
+    Return the swap cycle of ``loadport`` and ``loadlock`` (both need a port).
+
+    ``plan(start, goal, branches, load)``: how one move is planned (default: ``planner``);
+    raises PlanningError when it cannot be.
+    """
+    plan = plan or (lambda start, goal, branches, load: planner.plan(
+        start, goal, branches=branches, load=load))
+    lp, ll = f'{loadport}{INSIDE}', f'{loadlock}{INSIDE}'
+    out = _move(plan, lp, ll, LOADED, (None, None))
+    moves = (out,)
+    if out.result is not None:
+        start, goal = out.result.branches
+        moves += (_move(plan, ll, lp, EMPTY, (goal, start)),)
+    best, errors = (), []
+    for ea, eb in itertools.product(_branches(planner, loadport),
+                                    _branches(planner, loadlock)):
+        chain = []
+        for start, goal, branches in ((lp, loadport, (ea, ea)), (loadport, loadlock, (ea, eb)),
+                                      (loadlock, ll, (eb, eb)), (ll, loadlock, (eb, eb)),
+                                      (loadlock, loadport, (eb, ea)), (loadport, lp, (ea, ea))):
+            chain.append(_move(plan, start, goal, LOADED, branches))
+            if chain[-1].result is None:
+                errors.append(f'elbow {ea} -> {eb}: {start} -> {goal}: {chain[-1].error}')
+                break
+        else:
+            if not best or _total(chain, 6) < _total(best, 6):
+                best = tuple(chain)
+    return SwapCycle(loadport, loadlock, moves, best, tuple(errors))
+
+
+def loadport_loadlock_pairs(cell) -> list:
+    """Return every (loadport, loadlock) pair of stations with a port, by name."""
+    names = sorted(name for name, station in cell.stations.items() if station.port)
+    return [(a, b) for a in names for b in names
+            if a.startswith('loadport') and b.startswith('loadlock')]
+
+
+def _branches(planner: Planner, station: str) -> list:
+    """Return the elbow branches that reach inside ``station``'s port (None: joints)."""
+    return [elbow for elbow, _ in planner.endpoint(f'{station}{INSIDE}', 'start').configs]
+
+
+def _move(plan, start: str, goal: str, load: str, branches) -> Move:
+    try:
+        result = plan(start, goal, None if branches == (None, None) else branches, load)
+    except PlanningError as exc:
+        return Move(start, goal, load, branches, error=f'{exc.code.value}: {exc.message}')
+    return Move(start, goal, load, branches, result)
+
+
+def _total(moves, count: int) -> Optional[float]:
+    times = [m.cycle_time for m in moves]
+    if len(times) != count or any(t is None for t in times):
+        return None
+    return float(sum(times))
+
+
+def _per_hour(seconds: Optional[float]) -> Optional[float]:
+    return None if seconds is None else SECONDS_PER_HOUR / seconds
