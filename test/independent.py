@@ -54,7 +54,8 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
         assert ratio <= 1.0 + 1e-6, f'{name} reaches {ratio} x its limit'
     # Collisions: consecutive checks at most 1 mrad apart.
     assert np.abs(np.diff(q, axis=0)).max() <= 1e-3
-    assert not cell.fcl_model().in_collision_many(q).any()
+    # The wafer disc, or empty the end effector's envelope (the cell file's radius).
+    assert not cell.with_load(plan['load']).fcl_model().in_collision_many(q).any()
     # The samples are the spline's.
     samples = plan['points']
     ts = np.array([p['t'] for p in samples])

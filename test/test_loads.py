@@ -6,7 +6,7 @@ from independent import check
 import numpy as np
 import pytest
 from wafer_planner_ros.cell.model import Cell
-from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.errors import CellError, ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
@@ -78,3 +78,37 @@ def test_an_unknown_load_is_an_invalid_request(default_cell, default_roadmap):
         Planner(default_cell, default_roadmap).plan(*PAIR, load='half')
     assert caught.value.code == ErrorCode.INVALID_REQUEST
     assert "unknown load 'half'" in caught.value.message
+
+
+def test_an_empty_move_keeps_the_end_effectors_envelope_clear_not_the_wafers(
+        default_cell_file, default_roadmap):
+    with open(default_cell_file) as f:
+        document = yaml.safe_load(f)
+    document['robot']['empty_envelope_radius'] = 0.05
+    cell = Cell.from_dict(document)
+    empty = cell.with_load('empty')
+    assert (cell.robot.end_radius, empty.robot.end_radius) == (0.15, 0.05)
+    # Loaded moves keep the wafer's clearance, empty ones the envelope's: 0.10 m more room
+    # for the last body wherever the wafer is the closest to a wall.
+    q = np.array([c.q for s in cell.stations.values() for c in s.configs])
+    loaded_clearance = cell.clearance_model.body_clearance(q)[:, 3]
+    empty_clearance = empty.clearance_model.body_clearance(q)[:, 3]
+    assert np.allclose(empty_clearance, loaded_clearance + 0.10)
+    result = Planner(cell, default_roadmap).plan(*PAIR, load='empty')
+    plan = plan_json(result, roadmap_json(load_or_build(cell)), cell.robot.joint_names)
+    check(cell, plan, result.start_q, result.goal_q)
+    assert result.verification.ok
+
+
+@pytest.mark.parametrize('radius, says', [
+    (0.2, 'must not exceed the wafer radius (0.15 m)'), (0.0, 'must be > 0'),
+    ('big', 'must be a number')])
+def test_an_envelope_larger_than_the_wafer_or_not_a_radius_is_refused(
+        default_cell_file, radius, says):
+    with open(default_cell_file) as f:
+        document = yaml.safe_load(f)
+    document['robot']['empty_envelope_radius'] = radius
+    with pytest.raises(CellError) as caught:
+        Cell.from_dict(document)
+    assert caught.value.path == 'robot.empty_envelope_radius'
+    assert says in str(caught.value)

@@ -47,9 +47,9 @@ def capsule_outline(a: np.ndarray, b: np.ndarray, radius: float, n: int = 16) ->
 def body_outline(robot, q: np.ndarray, body: int) -> np.ndarray:
     """Return the outline (K, 2) of one body at q: link 0-2 (a capsule) or 3 (the wafer)."""
     points = robot.arm.joint_points(np.asarray(q, float))
-    if body == 3:
-        return points[3] + robot.wafer_radius * np.column_stack([np.cos(_ANGLES),
-                                                                 np.sin(_ANGLES)])
+    if body == 3:  # the wafer, or the empty end effector's envelope
+        return points[3] + robot.end_radius * np.column_stack([np.cos(_ANGLES),
+                                                               np.sin(_ANGLES)])
     return capsule_outline(points[body], points[body + 1], robot.link_radii[body])
 
 

@@ -98,15 +98,18 @@ class Cell:
         """
         Return the cell whose motions are planned against the limit set ``load``.
 
-        The geometry is this cell's, and so are its models (built here if not yet): the
-        empty blade is checked with the wafer disc's clearance, as the loaded one.
+        The geometry is this cell's, and so are its models (built here if not yet) unless the
+        end effector's envelope without a wafer (``Robot.empty_envelope_radius``) is not the
+        wafer disc: the clearance and motion models are then built for it.
         """
         robot = self.robot.with_load(load)
         if robot is self.robot:
             return self
         other = replace(self, robot=robot)
-        other.__dict__.update(clearance_model=self.clearance_model,
-                              port_model=self.port_model, motion_model=self.motion_model)
+        shared = {'port_model': self.port_model}
+        if np.array_equal(robot.body_radii, self.robot.body_radii):
+            shared.update(clearance_model=self.clearance_model, motion_model=self.motion_model)
+        other.__dict__.update(shared)
         return other
 
     @functools.cached_property
@@ -155,6 +158,8 @@ class Cell:
                 # Only when set: cells without them keep their digest (and roadmaps).
                 **({'clearance_margin': r.clearance_margin} if r.clearance_margin else {}),
                 **({'empty_joint_limits': raised} if raised else {}),
+                **({'empty_envelope_radius': r.empty_envelope_radius}
+                   if r.empty_envelope_radius is not None else {}),
             },
             'stations': {name: dict(s.spec) for name, s in sorted(self.stations.items())},
         }

@@ -37,6 +37,16 @@ class Robot:
     """Distance (m) every body keeps from every wall and obstacle; 0: touching is the limit."""
     load: str = LOADED
     """The limit set motions of this robot are planned and verified against."""
+    empty_envelope_radius: Optional[float] = None
+    """m: the disc about the wafer centre that holds the end effector without a wafer, which
+    empty moves keep clear of the walls in place of the wafer's; None: the wafer disc."""
+
+    @property
+    def end_radius(self) -> float:
+        """Return the radius of the last body: the wafer, or empty the envelope (m)."""
+        if self.load == EMPTY and self.empty_envelope_radius is not None:
+            return self.empty_envelope_radius
+        return self.wafer_radius
 
     @property
     def limit_set(self) -> LimitSet:
@@ -71,8 +81,8 @@ class Robot:
 
     @property
     def body_radii(self) -> np.ndarray:
-        """Return the radii of the bodies: three links then the wafer (m)."""
-        return np.append(self.link_radii, self.wafer_radius)
+        """Return the radii of the bodies: three links then the wafer (``end_radius``, m)."""
+        return np.append(self.link_radii, self.end_radius)
 
     @property
     def body_names(self) -> Tuple[str, ...]:
@@ -102,7 +112,8 @@ def read_robot(value, boundary, obstacles) -> Robot:
     r = schema.mapping(value, 'robot', required=(
         'base', 'joint_names', 'link_lengths', 'link_radii', 'wafer_radius', 'joint_limits',
         'wafer_acceleration_limit'), optional=('wafer_acceleration_norm_limit',
-                                               'empty_joint_limits', 'clearance_margin'))
+                                               'empty_joint_limits', 'empty_envelope_radius',
+                                               'clearance_margin'))
     base = schema.vector(r['base'], 'robot.base', 2)
     schema.coordinates(base, 'robot.base')
     if not points_in_polygon(base, boundary) or any(
@@ -121,12 +132,21 @@ def read_robot(value, boundary, obstacles) -> Robot:
     sizes = {key: schema.coordinates(schema.vector(r[key], f'robot.{key}', 3, positive=True),
                                      f'robot.{key}', 'longer than')
              for key in ('link_lengths', 'link_radii')}
+    radius = float(schema.coordinates(schema.number(
+        r['wafer_radius'], 'robot.wafer_radius', positive=True), 'robot.wafer_radius',
+        'larger than'))
+    envelope = r.get('empty_envelope_radius')
+    if envelope is not None:
+        envelope = schema.number(envelope, 'robot.empty_envelope_radius', positive=True)
+        if not envelope <= radius:
+            # The roadmap and the stations are checked with the wafer disc: a smaller disc
+            # keeps them valid, a larger one would not.
+            raise CellError('robot.empty_envelope_radius',
+                            f'{envelope:.6g} m must not exceed the wafer radius ({radius:g} m)')
     return Robot(
         base=base, joint_names=names,
         link_lengths=sizes['link_lengths'], link_radii=sizes['link_radii'],
-        wafer_radius=float(schema.coordinates(schema.number(
-            r['wafer_radius'], 'robot.wafer_radius', positive=True), 'robot.wafer_radius',
-            'larger than')),
+        wafer_radius=radius, empty_envelope_radius=envelope,
         limit_sets=_limit_sets(r),
         clearance_margin=float(schema.coordinates(margin, 'robot.clearance_margin',
                                                   'larger than')))
