@@ -148,7 +148,8 @@ class WholeCurve(KnotTiming):
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
         start, corridor = draft.work
         shape = self.shape if corridor.proven else replace(
-            self.shape, one_margin_outside=True, max_rounds=self.shape.port_max_rounds)
+            self.shape, one_margin_outside=True, max_rounds=self.shape.port_max_rounds,
+            qp_iterations=self.shape.port_qp_iterations)
         spans = shape.coarse_spans if corridor.proven else shape.port_coarse_spans
         coarse = optimise_shape(
             coarse_start(corridor.control_points, spans, self.cell.robot, self.settings),
@@ -168,6 +169,8 @@ class WholeCurve(KnotTiming):
         proven = fitted or corridor.proven or prove(
             begin, self.cell.motion_model, self.cell.motion_model.lipschitz).certified
         spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)
+        if fitted:  # refining a proven curve: the usual QP limit (``port_qp_iterations``)
+            shape = replace(shape, qp_iterations=self.shape.qp_iterations)
         shaped = optimise_shape(begin, self.cell, replace(shape, min_spans=spans),
                                 self.settings, give_up_above, until, proven=proven)
         if shaped is None:

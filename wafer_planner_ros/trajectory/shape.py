@@ -299,6 +299,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
                        problem.settings.budget_ftol,
                        first=(first[0][keep] * weights, first[1][keep] * weights[:, None]),
                        stop=None if deadline is None else
-                       (lambda: time.monotonic() >= deadline))
+                       (lambda: time.monotonic() >= deadline),
+                       qp_iterations=problem.settings.qp_iterations)
     points, intervals = problem.unpack(result.x, scale)
     return _Solved(points, intervals, result.iterations, result.message, result.converged)

@@ -51,12 +51,14 @@ class SqpResult:
 def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray,
           max_iterations: int = 100, acc: float = 1e-4,
           first: Optional[tuple] = None,
-          stop: Optional[Callable[[], bool]] = None) -> SqpResult:
+          stop: Optional[Callable[[], bool]] = None,
+          qp_iterations: int = QP_ITERATIONS) -> SqpResult:
     """
     Minimise c . x subject to evaluate(x)[0] >= 0 and lb <= x <= ub (see the module).
 
     ``evaluate(x) -> (g (m,), J (m, n))``; ``first``: its value at x0 if known. Bounds may
     be infinite. ``stop()`` true before an iteration ends the solve where it is.
+    ``qp_iterations``: daqp iterations per subproblem at most.
     """
     n = len(x0)
     lb = np.where(np.isfinite(lb), lb, -INF)
@@ -78,11 +80,11 @@ def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub:
         with timed('optimise.qp'):
             s, _, flag, info = daqp.solve(B, c, J, np.concatenate([hi, upper_rows]),
                                           np.concatenate([lo, -g]), sense,
-                                          iter_limit=QP_ITERATIONS)
+                                          iter_limit=qp_iterations)
         relaxed = flag < 1
         if relaxed:
             with timed('optimise.qp'):
-                s, mult, flag = _relaxed(B, c, J, g, lo, hi)
+                s, mult, flag = _relaxed(B, c, J, g, lo, hi, qp_iterations)
             if flag < 1:
                 if not reset:  # start B again from the identity once
                     B, reset, sense = np.eye(n), True, np.zeros(n + m, dtype=np.int32)
@@ -118,7 +120,7 @@ def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub:
     return SqpResult(x, u, iteration, message, message == 'converged')
 
 
-def _relaxed(B, c, J, g, lo, hi) -> tuple:
+def _relaxed(B, c, J, g, lo, hi, qp_iterations: int) -> tuple:
     """Solve the subproblem with the violated rows scaled by (1 - delta): (s, mult, flag)."""
     n, m = B.shape[0], len(g)
     H = np.zeros((n + 1, n + 1))
@@ -126,7 +128,7 @@ def _relaxed(B, c, J, g, lo, hi) -> tuple:
     A = np.hstack([J, -np.minimum(g, 0.0)[:, None]])
     sx, _, flag, info = daqp.solve(H, np.append(c, 0.0), A,
                                    np.concatenate([hi, [1.0], np.full(m, INF)]),
-                                   np.concatenate([lo, [0.0], -g]), iter_limit=QP_ITERATIONS)
+                                   np.concatenate([lo, [0.0], -g]), iter_limit=qp_iterations)
     if flag < 1:
         return None, None, flag
     mult = np.asarray(info['lam'])

@@ -2,6 +2,8 @@
 
 from dataclasses import dataclass
 
+from wafer_planner_ros.trajectory.sqp import QP_ITERATIONS
+
 
 @dataclass(frozen=True)
 class TimingSettings:
@@ -72,6 +74,18 @@ class ShapeSettings:
     place of 6 took loadport1 -> loadlock2 of the default cell from 1.86 x to 1.57 x the
     optimal-control cycle time, and five pairs of the test cells from 1.2-2.1 x the
     stop-and-go sequence to 0.65-0.93 x (no pair slower)."""
+    qp_iterations: int = QP_ITERATIONS
+    """daqp iterations per subproblem at most (``sqp``)."""
+    port_qp_iterations: int = 1500
+    """``qp_iterations`` for the coarse stage of a curve into or out of a port
+    (``through_ports``; the fine stage keeps ``qp_iterations`` once the coarse one has proven
+    a curve). Its subproblems (32 spans, the port margins) often need more than 400 active-set
+    iterations: stopped there, a solve ends at its first relaxed step. On the default cell's
+    loaded port-to-port moves, 400 gave 1.021, 1.572, 1.018 and 1.199 x the optimal-control
+    cycle time (loadport1 -> loadlock1, -> loadlock2, loadport2 -> loadlock1, loadport3 ->
+    loadlock2; planned in 12-69 s); 1500 gives loadport1 -> loadlock2 1.012 x, planned in
+    532 s (the QP 93 % of it; 1.002 x in 584 s with 1500 in the fine stage too, 1.005 x for
+    loadport1 -> loadlock1 in 71 s where the fine stage at 400 leaves 1.021 x in 9 s)."""
     one_margin_outside: bool = False
     """Where the wafer is outside a port, constrain one of its four margins, not all: they
     are then one value (how far outside) with one gradient, and the same row four times
