@@ -19,7 +19,7 @@ move's planning time (s), the way out against its three stop-and-go moves, the c
 against the stop-and-go cycle, and on the default cell the way out against the
 optimal-control figure of the same move (direct collocation with IPOPT, every joint and
 wafer limit including jerk, the port model of the cell file). Writes
-``results/ports.json``.
+``results/ports-<cell name>.json``.
 
 Run: ``python bench/bench_ports.py [CELL_FILE ...]`` (default: the three cells).
 """
@@ -41,7 +41,8 @@ from wafer_planner_ros.service.cycle import loadport_loadlock_pairs, swap_cycle
 from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 
 HERE = Path(__file__).resolve().parent
-RESULTS = HERE / 'results' / 'ports.json'
+RESULTS = HERE / 'results'
+"""One file per cell, ``ports-<cell name>.json``: a run of one cell leaves the others'."""
 OPTIMAL = {('loadport1', 'loadlock1'): 4.36, ('loadport1', 'loadlock2'): 3.67,
            ('loadport2', 'loadlock1'): 3.86, ('loadport3', 'loadlock2'): 2.80}
 """s: the optimal-control cycle time of the default cell's non-stop loaded moves."""
@@ -98,7 +99,6 @@ def main(argv=None) -> int:
     named = sys.argv[1:] if argv is None else argv
     cells = [Path(p) for p in named] or [default_cell_path()] + sorted(
         (HERE.parent / 'test' / 'cells').glob('*.yaml'))
-    report = {}
     for path in cells:
         cell = Cell.from_yaml(path)
         roadmap = load_or_build(cell).roadmap
@@ -123,18 +123,17 @@ def main(argv=None) -> int:
             values = [r[key] for r in rows if r.get(key) is not None]
             return float(np.median(values)) if values else None
 
-        report[cell.name] = {
-            'pairs': rows,
+        report = {
+            'cell': cell.name, 'pairs': rows,
             'median_over_optimal_control': median('over_optimal_control'),
             'median_non_stop_over_stop_and_go': median('non_stop_over_stop_and_go'),
             'median_cycle_over_stop_and_go': median('cycle_over_stop_and_go'),
-            'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows]))}
-    RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps({
-        'cells': report,
-        'machine': {'python': platform.python_version(), 'cpus': os.cpu_count()}},
-        indent=1) + '\n')
-    print(f'wrote {RESULTS}')
+            'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows])),
+            'machine': {'python': platform.python_version(), 'cpus': os.cpu_count()}}
+        RESULTS.mkdir(exist_ok=True)
+        written = RESULTS / f'ports-{cell.name}.json'
+        written.write_text(json.dumps(report, indent=1) + '\n')
+        print(f'wrote {written}')
     return 0
 
 

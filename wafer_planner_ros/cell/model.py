@@ -102,15 +102,22 @@ class Cell:
         end effector's envelope without a wafer (``Robot.empty_envelope_radius``) is not the
         wafer disc: the clearance and motion models are then built for it.
         """
-        robot = self.robot.with_load(load)
-        if robot is self.robot:
-            return self
-        other = replace(self, robot=robot)
-        shared = {'port_model': self.port_model}
-        if np.array_equal(robot.body_radii, self.robot.body_radii):
-            shared.update(clearance_model=self.clearance_model, motion_model=self.motion_model)
-        other.__dict__.update(shared)
-        return other
+        cells = self._by_load  # one cell per limit set, shared by all of them
+        if load not in cells:
+            robot = self.robot.with_load(load)
+            other = replace(self, robot=robot)
+            shared = {'port_model': self.port_model, '_by_load': cells}
+            if np.array_equal(robot.body_radii, self.robot.body_radii):
+                shared.update(clearance_model=self.clearance_model,
+                              motion_model=self.motion_model)
+            other.__dict__.update(shared)
+            cells[load] = other
+        return cells[load]
+
+    @functools.cached_property
+    def _by_load(self) -> dict:
+        """Return the cells of this one's geometry by limit set (``with_load``)."""
+        return {self.robot.load: self}
 
     @functools.cached_property
     def clearance_model(self) -> ClearanceModel:
