@@ -177,9 +177,13 @@ def _cycles(args, cell, planner) -> int:
                                            text='{done}/{total} pairs ({extra})')
     cycles = []
     for done, (loadport, loadlock) in enumerate(pairs):
-        if progress is not None:
-            progress(done, len(pairs), f'{loadport} <-> {loadlock}')
-        cycles.append(swap_cycle(planner, loadport, loadlock))
+
+        def plan(start, goal, branches, load, done=done):  # each move shown as it starts
+            if progress is not None:
+                progress(done, len(pairs), f'{start} -> {goal}, {load}')
+            return planner.plan(start, goal, branches=branches, load=load)
+
+        cycles.append(swap_cycle(planner, loadport, loadlock, plan))
     if progress is not None:
         progress.done()
     rows = [c.row() for c in cycles]
