@@ -134,6 +134,9 @@ def main() -> int:
     node = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.main',
                              '--ros-args', '-p', 'planning.timeout:=60.0',
                              '-p', f'planning.max_queue:={BURST + 10}',
+                             # the station pairs only: the moves through the ports take
+                             # tens of minutes to plan, and would share the cores meanwhile
+                             '-p', 'planning.station_table_ports:=false',
                              '-p', f'roadmap.cache_dir:={cache}',
                              '-p', f'recording.directory:={recordings}'],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

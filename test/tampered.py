@@ -14,6 +14,9 @@ curve. The edits, each to one entry's curve:
 - ``nan``: a NaN in a control point and, in a file that stores figures, in one of them;
 - ``slowed``: every knot times 1000, a curve within every limit that lasts about an hour
   (checking it would take seconds and hundreds of megabytes);
+- ``askew``: the wrist's fourth control point (the first that is free of the start at rest)
+  turned by 0.05 rad: a motion that starts and ends as stored but, out of a port, turns the
+  blade beyond the port's heading tolerance;
 
 and, the curve left as it is, to what an answer reports besides it:
 
@@ -54,6 +57,10 @@ def _slowed(entry: dict) -> None:
     spline['knots'] = [1000.0 * t for t in spline['knots']]
 
 
+def _askew(entry: dict) -> None:
+    entry['trajectory']['control_points'][3][2] += 0.05
+
+
 def _initial(entry: dict) -> None:
     entry['initial_cycle_time'] = float('nan')
 
@@ -67,7 +74,8 @@ def _path(entry: dict) -> None:
 
 
 EDITS = {'halved': _halved, 'shifted': _shifted, 'nudged': _nudged, 'nan': _nan,
-         'slowed': _slowed, 'initial': _initial, 'counted': _counted, 'path': _path}
+         'slowed': _slowed, 'askew': _askew, 'initial': _initial, 'counted': _counted,
+         'path': _path}
 """Kind of edit -> what it does to a stored entry."""
 
 

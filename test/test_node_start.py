@@ -154,6 +154,7 @@ def table_node(roadmap_cache, tmp_path_factory, default_cell, default_roadmap):
     save_table(replace(build_table(Planner(default_cell, default_roadmap)),
                        key=table_key(whole)), cache)
     node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.station_table_ports': False,
                     'planning.timeout': 30.0})
     assert node.status()['station_table'] > 0
     yield node

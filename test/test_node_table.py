@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 from tampered import tamper
 
+from wafer_planner_ros.cell.limits import LOADS
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service.table import build_table, load_table, save_table, table_key
-from wafer_planner_ros.service.table import table_path
+from wafer_planner_ros.service.table import table_pairs, table_path
 
 
 @pytest.mark.slow
@@ -26,6 +27,7 @@ def test_station_requests_are_answered_from_the_table_the_node_planned(
     shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
     assert not list(cache.glob('table-*.json'))
     node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.station_table_ports': False,
                     'planning.optimise_budget': 0.2, 'planning.timeout': 30.0})
     try:
         pairs = len(station_pairs(default_cell))
@@ -70,6 +72,7 @@ def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_p
     there, back = ('loadport1', 'loadlock2'), ('loadlock2', 'loadport1')
     edited = tamper(table_path(cache, table.key), {there: 'halved', back: 'shifted'})
     node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.station_table_ports': False,
                     'planning.timeout': 30.0})
     try:
         # Loaded before the node took over: the two entries rejected at once, so that even
@@ -92,5 +95,38 @@ def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_p
         assert health['station_table_rejected'] == '2'
         stored = load_table(whole, cache)  # planned again and stored: nothing to reject
         assert not stored.rejected and len(stored) == len(station_pairs(default_cell))
+    finally:
+        node.close()
+
+
+def test_the_moves_through_the_ports_are_answered_from_the_tables_loaded_and_empty(
+        roadmap_cache, tmp_path, default_cell, default_roadmap):
+    """Both limit sets' tables cached whole: every pair, retracted and port to port, at once."""
+    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
+    isolate_dds(tmp_path)
+    cache = tmp_path / 'cache'
+    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    # The node's tables (whole-curve), their curves from the corridor method (milliseconds;
+    # verified on load like any other).
+    whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    corridor = Planner(default_cell, default_roadmap)
+    pairs = table_pairs(default_cell)
+    for load in LOADS:
+        table = build_table(corridor.for_load(load), pairs=pairs)
+        save_table(replace(table, key=table_key(whole.for_load(load))), cache)
+    node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.timeout': 30.0})
+    try:
+        status = node.status()
+        assert status['station_table'] == status['station_table_empty'] == len(pairs)
+        assert status['busy_with'] != 'station_table'  # nothing left to plan
+        for number, load in enumerate(LOADS):
+            node.send_stations({'id': f'p{number}', 'from': 'loadport1:inside',
+                                'to': 'loadlock2:inside', 'load': load})
+            result = node.result(f'p{number}')
+            assert result.level == DiagnosticStatus.OK, result.message
+            got = values(result)
+            assert got['source'] == 'table' and got['load'] == load, got
+            assert got['certified'] == 'True'
     finally:
         node.close()

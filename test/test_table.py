@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from tampered import digest, tamper
 
+from wafer_planner_ros.cell.limits import EMPTY, LOADED
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
@@ -21,7 +22,8 @@ from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_and_store_table, inherited_table
 from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
-from wafer_planner_ros.service.table import save_table, table_key, table_path, TableError
+from wafer_planner_ros.service.table import lacking, port_pairs, save_table, table_key
+from wafer_planner_ros.service.table import table_pairs, table_path, TableError
 from wafer_planner_ros.trajectory.verify import verify
 
 _Request = namedtuple('_Request', 'start goal')
@@ -162,12 +164,17 @@ def test_the_service_answers_from_its_table_once_it_is_set(planner, built):
     assert np.allclose(np.diff(answer.times)[:-1], 0.05)
 
 
-def test_a_table_missing_pairs_is_refused_a_colliding_curve_rejected(planner, built, tmp_path):
+def test_a_table_missing_pairs_is_completed_a_colliding_curve_rejected(
+        planner, built, tmp_path):
     pairs = sorted(built.entries)
     short = replace(built, entries={pair: built.entries[pair] for pair in pairs[1:]})
     save_table(short, tmp_path)
-    with pytest.raises(TableError, match='lacks 1 station pairs'):
-        load_table(planner, tmp_path)
+    loaded = load_table(planner, tmp_path)  # a build stopped half-way: kept, completed
+    assert lacking(loaded, station_pairs(planner.cell)) == [pairs[0]]
+    assert lacking(loaded, port_pairs(planner.cell)) == port_pairs(planner.cell)
+    completed = load_or_build_table(planner, tmp_path)
+    assert set(completed.entries) == set(pairs) and not lacking(completed, pairs)
+    assert completed.entries[pairs[1]] == built.entries[pairs[1]]  # kept, not planned again
     # A curve through the back wall, its digest consistent and its stored proof "certified".
     entry = json.loads(json.dumps(built.entries[pairs[0]]))
     points = entry['trajectory']['control_points']
@@ -202,7 +209,7 @@ TAMPERED = ('loadport1', 'loadlock2')
     ('slowed', r'its curve lasts [0-9.]+ s, over 60 s'),
     ('initial', 'its initial cycle time nan is not a finite time'),
     ('counted', 'its planning counts are not all finite numbers or flags'),
-    ('path', "its roadmap_path is not a path from the curve's start to its end"),
+    ('path', "its roadmap_path is not a path from its stations' retracted poses to its end"),
 ])
 def test_a_tampered_entry_is_rejected_never_published(planner, built, default_cell,
                                                       roadmap_cache, tmp_path, kind, words):
@@ -323,3 +330,62 @@ def test_an_entry_of_an_unknown_kind_of_curve_is_rejected(planner, built, tmp_pa
     assert pair not in loaded.entries
     assert "unknown kind of curve 'quintic'" in loaded.rejected[pair]
     assert len(loaded.entries) == len(built.entries) - 1
+
+
+@pytest.fixture(scope='module')
+def through_ports(planner):
+    """Return the default cell's port pairs planned loaded and empty: {load: table}."""
+    return {load: build_table(planner.for_load(load), pairs=port_pairs(planner.cell))
+            for load in (LOADED, EMPTY)}
+
+
+def test_the_table_holds_the_moves_through_the_ports_loaded_and_empty(
+        planner, through_ports, default_cell, roadmap_cache, tmp_path):
+    """Inside one port to inside another, each limit set's own table, stored and loaded."""
+    ports = port_pairs(default_cell)
+    assert len(ports) == len(station_pairs(default_cell))  # every station has a port here
+    assert ('loadport1:inside', 'loadlock2:inside') in ports
+    assert table_pairs(default_cell) == station_pairs(default_cell) + ports
+    info = roadmap_json(load_or_build(default_cell, cache_dir=roadmap_cache))
+    for load, table in through_ports.items():
+        assert table.load == load and set(table.entries) == set(ports) and not table.failures
+        assert table_key(planner.for_load(load)) == table.key
+        save_table(table, tmp_path)
+        loaded = load_table(planner.for_load(load), tmp_path)
+        assert loaded.loaded and not loaded.rejected and set(loaded.entries) == set(ports)
+        for start, goal in ports:
+            answer = loaded.answer(planner, start, goal)  # the table's load, whatever asks
+            assert answer.load == load and answer.metrics['source'] == 'table'
+            assert np.array_equal(answer.start_q, planner.endpoint(start, 'start').configs[
+                [elbow for elbow, _ in planner.endpoint(start, 'start').configs].index(
+                    answer.branches[0])][1])
+            figures = check(planner.for_load(load).cell,
+                            plan_json(answer, info, default_cell.robot.joint_names),
+                            answer.start_q, answer.goal_q)  # port tolerances every 1 ms
+            assert figures['port_lateral'] > 0.0 and figures['port_heading'] >= 0.0
+    assert through_ports[LOADED].key != through_ports[EMPTY].key  # one file per limit set
+    # The service answers a move from the table of its limit set only.
+    service = PlanningService(planner, tables=through_ports)
+    request = ('loadport1:inside', 'loadlock1:inside')
+    for load in (LOADED, EMPTY):
+        assert service.holds(*request, load=load)
+        assert service.answer(*request, load=load).load == load
+    alone = PlanningService(planner, tables={EMPTY: through_ports[EMPTY]})
+    assert not alone.holds(*request) and alone.holds(*request, load=EMPTY)
+    assert alone.answer(*request).metrics.get('source') != 'table'
+    with pytest.raises(ValueError, match='loadport1->loadport2 is not a pair'):
+        build_table(planner, pairs=[('loadport1', 'loadport2')])
+
+
+def test_a_port_entry_turned_askew_is_rejected_never_published(
+        planner, through_ports, tmp_path):
+    """Out of a port the blade turns beyond its heading tolerance: rejected on load."""
+    table = through_ports[EMPTY]
+    pair = ('loadport1:inside', 'loadlock2:inside')
+    save_table(table, tmp_path)
+    tamper(table_path(tmp_path, table.key), {pair: 'askew'})
+    loaded = load_table(planner.for_load(EMPTY), tmp_path)
+    assert pair not in loaded.entries and loaded.answer(planner, *pair) is None
+    assert re.search(r'the wafer inside a port reaches [0-9.]+ x its heading tolerance',
+                     loaded.rejected[pair]), loaded.rejected[pair]
+    assert set(loaded.entries) == set(table.entries) - {pair}

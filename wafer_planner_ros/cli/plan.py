@@ -34,19 +34,19 @@ def plan_one(planner, start, goal, info, joint_names, stations=None,
     """
     Return (result or None, JSON object) for one request; from ``stations`` if it has it.
 
-    ``load``: the limit set (``Planner.plan``); the station table holds loaded moves.
+    ``load``: the limit set (``Planner.plan``); ``stations``: the station table of its moves.
 
     A pair whose stored entry the table rejected on load is never answered from the file:
     it is planned, with a warning on stderr naming it and why.
     """
-    if stations is not None and isinstance(start, str) and isinstance(goal, str) \
-            and load == LOADED:
+    if stations is not None and isinstance(start, str) and isinstance(goal, str):
         rejected = stations.rejected.get((start, goal))
         if rejected is not None:
             print(f'warning: station table: {start} -> {goal} rejected ({rejected}); '
                   'planned again', file=sys.stderr)
     try:
-        result = PlanningService(planner, stations).answer(start, goal, load=load)
+        tables = {} if stations is None else {load: stations}
+        result = PlanningService(planner, tables=tables).answer(start, goal, load=load)
     except PlanningError as exc:
         return None, error_json(exc.code.value, exc.message, start, goal, info, load)
     return result, plan_json(result, info, joint_names)
@@ -54,7 +54,9 @@ def plan_one(planner, start, goal, info, joint_names, stations=None,
 
 def station_table(args, planner, quiet: bool):
     """
-    Return the station table for whole-curve plans: cached, or built for --all-pairs.
+    Return the station table of the planner's limit set (whole-curve plans only).
+
+    Cached, or built for --all-pairs.
 
     A single pair is answered from a cached table when there is one and planned on its own
     otherwise (building the whole table for one pair would take the time of all of them).
@@ -150,9 +152,7 @@ def main(argv=None) -> int:
         return _cycles(args, cell, planner)
     info = roadmap_json(cached)
     results, rows = [], []
-    # The station table holds loaded moves: empty ones are planned.
-    stations = station_table(args, planner, quiet=args.json == '-') \
-        if args.load == LOADED else None
+    stations = station_table(args, planner.for_load(args.load), quiet=args.json == '-')
     for start, goal in requests or station_pairs(cell):
         result, row = plan_one(planner, start, goal, info, cell.robot.joint_names, stations,
                                args.load)

@@ -383,10 +383,10 @@ class WaferPlannerNode(Node):
             level = max(level, DiagnosticStatus.WARN)
             message += ('; recording stalled: the disk has not synced for 0.25 s, answers go '
                         'out before they are on it')
-        keys = ('ready', 'nodes', 'edges', 'hash', 'station_table', 'station_table_rejected',
-                'queue', 'served', 'failed', 'rebuild_failed', 'last_rebuild_error',
-                'recording', 'recording_directory', 'recording_error', 'recording_lost',
-                'answers_before_recorded')
+        keys = ('ready', 'nodes', 'edges', 'hash', 'station_table', 'station_table_empty',
+                'station_table_rejected', 'queue', 'served', 'failed', 'rebuild_failed',
+                'last_rebuild_error', 'recording', 'recording_directory', 'recording_error',
+                'recording_lost', 'answers_before_recorded')
         health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
                                   message=message, hardware_id='wafer_planner',
                                   values=[KeyValue(key=k, value=str(status.get(k, '')))

@@ -2,24 +2,29 @@
 A roadmap ready to serve: its planning service, when it took over, and how it got there.
 
 The worker's loading thread builds or loads a roadmap (``progress_reporter`` logs the
-build), waits for the compiled kernels (``node.startup``), loads the cached station table
-(``load_station_table``), which verifies every entry in full and leaves out those that
-fail, and hands it all over as a ``Serving``: a ``service.planning.PlanningService`` with
-the table as its cache. From then on the node is ready. When the table was not cached, it
-is planned then, and when entries were rejected, those pairs (``build_station_table``;
-``table_to_plan`` says whether), and the service's table is replaced by the planned one.
-How a request is answered is the service's to say.
+build), waits for the compiled kernels (``node.startup``), loads the cached station tables
+(``load_station_tables``: one per limit set), which verify every entry in full and leave
+out those that fail, and hands it all over as a ``Serving``: a
+``service.planning.PlanningService`` with the tables as its cache. From then on the node is
+ready. What the tables lack of what they are to hold (``table_groups``: the station pairs
+loaded; with ``planning.station_table_ports`` also empty, then the port pairs loaded and
+empty), or rejected, is planned then, group by group (``build_station_tables``;
+``table_to_plan`` says whether), each table stored and handed to the service as each
+group is planned: the quick station pairs are answered from the table within seconds, the
+port pairs minutes later. How a request is answered is the service's to say.
 """
 
 from dataclasses import dataclass
 import time
-from typing import Optional
+from typing import Callable, Dict, Optional
 
+from wafer_planner_ros.cell.limits import EMPTY, LOADED
+from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
 from wafer_planner_ros.service.planning import PlanningService, whole_curve
-from wafer_planner_ros.service.table import build_and_store_table, load_table, StationTable
-from wafer_planner_ros.service.table import TableError
+from wafer_planner_ros.service.table import build_and_store_table, lacking, load_table
+from wafer_planner_ros.service.table import port_pairs, StationTable, TableError
 
 
 @dataclass(frozen=True)
@@ -53,56 +58,91 @@ def progress_reporter(logger):
     return report
 
 
-def load_station_table(planner: Planner, settings, logger) -> Optional[StationTable]:
-    """Return the cached station table of a serving planner, or None (none usable)."""
-    if not settings.station_table or settings.cache_dir is None:
-        return None
-    try:
-        table = load_table(whole_curve(planner), settings.cache_dir)
-    except TableError as exc:
-        logger.info(f'station table: {exc}; planning it')
-        return None
-    for (start, goal), reason in sorted(table.rejected.items()):
-        logger.warning(f'station table: {start} -> {goal} rejected, never answered from the '
-                       f'file, planned again: {reason}')
-    _report(table, logger)
-    return table
+def table_groups(planner: Planner, settings) -> list:
+    """
+    Return what the station tables are to hold, in the order planned: [(load, pairs)].
+
+    The station pairs loaded; with ``station_table_ports`` the same empty, then the port
+    pairs loaded, then empty. None without ``station_table``.
+    """
+    if not settings.station_table:
+        return []
+    groups = [(LOADED, station_pairs(planner.cell))]
+    ports = port_pairs(planner.cell)
+    if settings.station_table_ports:
+        groups.append((EMPTY, station_pairs(planner.cell)))
+        groups += [(load, ports) for load in (LOADED, EMPTY) if ports]
+    return groups
 
 
-def table_to_plan(table: Optional[StationTable], settings) -> bool:
-    """Return whether a loaded station table (None: none) is to be planned, whole or in part."""
-    return settings.station_table and (table is None or bool(table.rejected))
+def load_station_tables(planner: Planner, settings, logger) -> Dict[str, StationTable]:
+    """Return the cached station tables of a serving planner by limit set (those usable)."""
+    if settings.cache_dir is None:
+        return {}
+    tables = {}
+    for load in dict.fromkeys(load for load, _ in table_groups(planner, settings)):
+        try:
+            table = load_table(whole_curve(planner).for_load(load), settings.cache_dir)
+        except TableError as exc:
+            logger.info(f'station table ({load}): {exc}; planning it')
+            continue
+        for (start, goal), reason in sorted(table.rejected.items()):
+            logger.warning(f'station table ({load}): {start} -> {goal} rejected, never '
+                           f'answered from the file, planned again: {reason}')
+        _report(table, logger)
+        tables[load] = table
+    return tables
 
 
-def build_station_table(planner: Planner, settings, logger,
-                        loaded: Optional[StationTable] = None) -> StationTable:
-    """Plan the station table of a serving planner (or the pairs ``loaded`` rejected); store it."""
-    begun = time.monotonic()
+def table_to_plan(planner: Planner, tables: Dict[str, StationTable], settings) -> bool:
+    """Return whether the loaded station tables lack any pair they are to hold."""
+    groups = table_groups(planner, settings)
+    return any(lacking(tables.get(load), pairs) for load, pairs in groups)
 
-    def progress(done: int, total: int, pair: str) -> None:
-        logger.info(f'station table: {done}/{total} pairs planned ({pair}, '
-                    f'{time.monotonic() - begun:.1f} s)')
 
-    table = build_and_store_table(whole_curve(planner), settings.cache_dir, progress,
-                                  logger.warning, loaded)
-    _report(table, logger)
-    return table
+def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, StationTable],
+                         publish: Callable[[str, StationTable], None]) -> None:
+    """
+    Plan what the station tables lack, group by group (``table_groups``), storing each.
+
+    ``tables``: those loaded; ``publish(load, table)`` after each group planned.
+    """
+    tables = dict(tables)
+    for load, pairs in table_groups(planner, settings):
+        missing = lacking(tables.get(load), pairs)
+        if not missing:
+            continue
+        begun = time.monotonic()
+
+        def progress(done: int, total: int, pair: str, load=load, begun=begun) -> None:
+            logger.info(f'station table ({load}): {done}/{total} pairs planned ({pair}, '
+                        f'{time.monotonic() - begun:.1f} s)')
+
+        logger.info(f'station table ({load}): planning {len(missing)} pairs, e.g. '
+                    f'{"->".join(missing[0])}')
+        table = tables[load] = build_and_store_table(
+            whole_curve(planner).for_load(load), settings.cache_dir, progress,
+            logger.warning, tables.get(load), pairs)
+        _report(table, logger)
+        publish(load, table)
 
 
 def _report(table: StationTable, logger) -> None:
     for (start, goal), reason in sorted(table.failures.items()):
-        logger.warning(f'station table: {start} -> {goal} not planned: {reason}')
-    logger.info(f'station table ready: {len(table)} pairs, '
+        logger.warning(f'station table ({table.load}): {start} -> {goal} not planned: {reason}')
+    logger.info(f'station table ({table.load}) ready: {len(table)} pairs, '
                 f'{"loaded" if table.loaded else "planned"} in {table.seconds:.2f} s')
 
 
 def table_counts(serving: Optional[Serving]) -> dict:
     """
-    Return the status counts of the serving roadmap's station table.
+    Return the status counts of the serving roadmap's station tables.
 
-    ``station_table``: the pairs it holds; ``station_table_rejected``: the entries of the
-    cached file it rejected on load. Both 0 without a table (or a serving roadmap).
+    ``station_table``: the pairs the loaded moves' table holds; ``station_table_empty``: the
+    empty moves'; ``station_table_rejected``: the entries of the cached files they rejected
+    on load. Each 0 without a table (or a serving roadmap).
     """
-    stations = None if serving is None else serving.service.table
-    return {'station_table': len(stations) if stations is not None else 0,
-            'station_table_rejected': len(stations.rejected) if stations is not None else 0}
+    tables = {} if serving is None else serving.service.tables
+    return {'station_table': len(tables[LOADED]) if LOADED in tables else 0,
+            'station_table_empty': len(tables[EMPTY]) if EMPTY in tables else 0,
+            'station_table_rejected': sum(len(table.rejected) for table in tables.values())}

@@ -12,10 +12,12 @@ roadmap, waits for the compiled kernels (``startup.kernels_ready``: loaded since
 process started, built ahead of time or from numba's cache, or compiled when missing) and
 loads the cached station
 table, and only then does the roadmap serve: the node is ready when it can answer, and
-until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. When no
-table was cached it is planned next, and so are the pairs whose cached entries failed
-verification (``busy_with: station_table``), station pairs the table does not hold being
-planned within the budget meanwhile. A rebuild does the same while the previous roadmap serves,
+until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. What the
+cached station tables lack is planned next, group by group, each handed to the service as
+it is planned (``serving.table_groups``: the station pairs, then the empty moves and the
+moves through the ports), and so are the pairs whose cached entries failed verification
+(``busy_with: station_table``), pairs the tables do not hold yet being planned within the
+budget meanwhile. A rebuild does the same while the previous roadmap serves,
 and keeps it serving when it fails (``rebuild_failed`` in the status says why). Each
 request is planned on the roadmap in force when it was received, the one a recording pairs
 it with, and answered as ``service.planning`` says. The worker never publishes: it
@@ -41,7 +43,7 @@ from wafer_planner_ros.node import markers, messages
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import build_station_table, load_station_table
+from wafer_planner_ros.node.serving import build_station_tables, load_station_tables
 from wafer_planner_ros.node.serving import progress_reporter, Serving
 from wafer_planner_ros.node.serving import table_counts, table_to_plan
 from wafer_planner_ros.node.startup import (import_for_planning, kernels_ready,
@@ -449,9 +451,9 @@ class PlanningWorker:
             return
         finally:
             self._enter(Phase.LOADING)  # the kernels are loaded (or failed): no longer compiling
-        table = None
+        tables = {}
         try:
-            table = load_station_table(planner, settings, self._logger)
+            tables = load_station_tables(planner, settings, self._logger)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not loaded: {reason_of(exc)}')
         roadmap = cached.roadmap
@@ -476,9 +478,9 @@ class PlanningWorker:
             with self.lock:
                 self._pending_ns = None  # first: planning waits while it is set
                 self._previous = self._serving
-                serving = self._serving = Serving(PlanningService(planner, table), cached,
-                                                  loaded_ns)
-                if table_to_plan(table, settings):
+                serving = self._serving = Serving(PlanningService(planner, tables=tables),
+                                                  cached, loaded_ns)
+                if table_to_plan(planner, tables, settings):
                     self._enter(Phase.PLANNING_TABLE, locked=True)
                 self._loading_cell = None
                 self.load_failed, self.last_load_error = False, ''
@@ -486,7 +488,7 @@ class PlanningWorker:
         self._logger.info(
             f'ready: roadmap {roadmap.node_count} nodes, {roadmap.edge_count} edges, hash '
             f'{roadmap.digest[:12]}, {cached.status.value} in {cached.seconds:.2f} s; station '
-            f'table {"of " + str(len(table)) + " pairs" if table is not None else "to plan"}'
+            f'table {_held(tables) or "to plan"}'
             f' (ready {time.monotonic() - started:.2f} s after loading began'
             f'{since_process_start()})')
         try:
@@ -500,15 +502,18 @@ class PlanningWorker:
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
-        if not table_to_plan(table, settings):
+        if not table_to_plan(planner, tables, settings):
             return
+
+        def publish(load: str, table) -> None:
+            with self.lock:
+                serving.service.set_table(load, table)
+
         try:
-            table = build_station_table(planner, settings, self._logger, table)
+            build_station_tables(planner, settings, self._logger, tables, publish)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
-        with self.lock:
-            serving.service.table = table
-            self._enter(Phase.LOADING, locked=True)  # the table planned: the load ends
+        self._enter(Phase.LOADING)  # the table planned: the load ends
 
     def _kernels_compiling(self) -> None:
         """Say, in the status and to requests, that the kernels are being compiled."""
@@ -538,3 +543,9 @@ class PlanningWorker:
                 f'rebuild failed: {reason}; serving the previous roadmap '
                 f'{serving.cached.roadmap.digest[:12]}')
         self._logger.error(self.last_error)
+
+
+def _held(tables: dict) -> str:
+    """Return 'of 12 loaded pairs, 12 empty pairs' for the station tables ('' for none)."""
+    held = ', '.join(f'{len(table)} {load} pairs' for load, table in tables.items())
+    return f'of {held}' if held else ''

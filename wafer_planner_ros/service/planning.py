@@ -2,11 +2,13 @@
 How a request is answered: one policy for the node, ``wafer-plan`` and ``wafer-replay``.
 
 ``PlanningService(planner, table, budget).answer(start, goal, deadline)``, where the station
-table is the service's cache (``table``, which the node sets once it is planned; ``holds``
-says whether it answers a request at once):
+tables are the service's cache (``tables``, one per limit set: ``table`` is the loaded one;
+the node sets them as they are planned; ``holds`` says whether they answer a request at
+once):
 
-- a station pair its station table holds: from the table (every entry verified in full
-  when it was loaded or planned; ``service.table``);
+- a pair the station table of its limit set holds (retracted to retracted, or inside a port
+  to inside another): from the table (every entry verified in full when it was loaded or
+  planned; ``service.table``);
 - without a budget (``budget`` None: ``wafer-plan``, a replay): planned by ``planner`` with
   its own curve method, as long as it takes (until ``deadline``, if any);
 - with a budget (the node: ``planning.optimise_budget`` s): anything else (joint angles, a
@@ -27,7 +29,7 @@ from the record of a query.
 
 from dataclasses import replace
 import time
-from typing import Mapping, Optional, Type
+from typing import Dict, Mapping, Optional, Type
 
 from wafer_planner_ros.cell.limits import LOADED
 from wafer_planner_ros.planner import Planner, PlanResult
@@ -44,31 +46,56 @@ class PlanningService:
     """A planner, its station table as a cache, and how a request is answered (the module)."""
 
     def __init__(self, planner: Planner, table: Optional[StationTable] = None,
-                 budget: Optional[float] = None):
-        """Answer with ``planner`` and ``table``; ``budget`` s of optimisation, or None."""
+                 budget: Optional[float] = None,
+                 tables: Optional[Dict[str, StationTable]] = None):
+        """
+        Answer with ``planner`` and its station tables; ``budget`` s of optimisation, or None.
+
+        ``tables``: by limit set (``StationTable.load``); ``table``: the loaded one.
+        """
         self.planner, self.budget = planner, budget
-        self.table = table
-        """The station table (None: none, or not yet planned); it may be set at any time
-        (the node sets it once the table is planned)."""
+        self.tables: Dict[str, StationTable] = dict(tables or {})
+        """The station tables by limit set (none for a set: none, or not yet planned); one
+        may be set at any time (the node sets each as it is planned), never mutated."""
+        if table is not None:
+            self.table = table
+
+    @property
+    def table(self) -> Optional[StationTable]:
+        """Get the loaded moves' station table: None when there is none, or not yet."""
+        return self.tables.get(LOADED)
+
+    @table.setter
+    def table(self, table: Optional[StationTable]) -> None:
+        self.set_table(LOADED, table)
+
+    def set_table(self, load: str, table: Optional[StationTable]) -> None:
+        """Answer from ``table`` the moves of the limit set ``load`` (None: from none)."""
+        tables = dict(self.tables)  # replaced whole: a reader sees the old or the new
+        if table is None:
+            tables.pop(load, None)
+        else:
+            tables[load] = table
+        self.tables = tables
 
     def holds(self, start, goal, load: str = LOADED) -> bool:
         """Return whether the station table answers ``start`` to ``goal`` (at once)."""
         return self._holding(start, goal, load) is not None
 
     def _holding(self, start, goal, load: str) -> Optional[StationTable]:
-        """Return the station table if it holds ``start`` to ``goal``, else None."""
-        table = self.table  # read once: it may be set meanwhile
+        """Return the station table of ``load`` if it holds ``start`` to ``goal``, else None."""
+        table = self.tables.get(load)  # read once: it may be set meanwhile
         held = table is not None and isinstance(start, str) and isinstance(goal, str) \
-            and load == LOADED and (start, goal) in table.entries
+            and (start, goal) in table.entries
         return table if held else None
 
     def using(self, budget: Optional[float], sample_period: float) -> 'PlanningService':
-        """Return the service with another budget and sample period, and the same table."""
+        """Return the service with another budget and sample period, and the same tables."""
         planner = self.planner
         if planner.settings.sample_period != sample_period:
             planner = Planner(planner.cell, planner.roadmap,
                               replace(planner.settings, sample_period=sample_period))
-        return PlanningService(planner, self.table, budget)
+        return PlanningService(planner, budget=budget, tables=self.tables)
 
     def answer(self, start, goal, deadline: Optional[float] = None,
                load: str = LOADED) -> PlanResult:
@@ -76,8 +103,8 @@ class PlanningService:
         Return the verified answer from ``start`` to ``goal`` (stations or joint angles).
 
         ``deadline``: a ``time.monotonic()`` instant after which planning gives up with
-        TIMEOUT. ``load``: the limit set (``Planner.plan``); the station table holds loaded
-        moves. Raises PlanningError with the code of the first reason it cannot answer.
+        TIMEOUT. ``load``: the limit set (``Planner.plan``), which picks the station table.
+        Raises PlanningError with the code of the first reason it cannot answer.
         """
         table = self._holding(start, goal, load)
         if table is not None:

@@ -50,6 +50,10 @@ PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('planning.station_table', True,
               'plan every loadport-loadlock pair with the whole-curve optimisation once the '
               'roadmap is loaded (kept in the cache directory) and answer them from it'),
+    Parameter('planning.station_table_ports', True,
+              'then also the same pairs empty, and inside one port to inside the other '
+              'loaded and empty (the port moves take minutes each to plan, once: the table '
+              'is stored as each is planned, and a restart goes on from there)'),
     Parameter('planning.optimise_budget', 0.12,
               'seconds the whole-curve optimisation may spend on a request the station table '
               'does not hold (the best proven curve by then is returned; with none proven '
@@ -100,6 +104,8 @@ class NodeSettings:
     sample_period: float
     timeout: float
     station_table: bool
+    station_table_ports: bool
+    """The station table also holds the empty moves and the moves through the ports."""
     optimise_budget: float
     max_queue: int
     recording_enabled: bool
@@ -157,6 +163,7 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         sample_period=float(merged['trajectory.sample_period']),
         timeout=float(merged['planning.timeout']),
         station_table=merged['planning.station_table'],
+        station_table_ports=merged['planning.station_table_ports'],
         optimise_budget=float(merged['planning.optimise_budget']),
         max_queue=merged['planning.max_queue'],
         recording_enabled=merged['recording.enabled'],

@@ -1,16 +1,21 @@
 """
-The station table: every loadport-loadlock pair planned once, kept on disk, answered at once.
+The station table: the loadport-loadlock pairs planned once, kept on disk, answered at once.
 
 Station pairs are a fab's hot path, and the best trajectories take seconds to find
-(``trajectory.shape``). ``build_table`` plans every pair of ``station_pairs`` with a
-planner (one direction of each; the other is the same motion backwards);
-``save_table``/``load_table`` keep the table in the cache directory, one JSON file per key.
-The key is the SHA-256 of the cell's digest, the roadmap's hash, the planner's settings
-(all but the sample period, which only changes the returned samples) and the package
-version. The file (``FORMAT`` 2) stores the key, the SHA-256 of its content and each
-pair's plan, but no figure of its verification. On load the key, the format and the
-digest are checked and every station pair must be there (or recorded as not plannable):
-a stale, foreign or corrupt file is reported and rebuilt, never trusted. The digest guards
+(``trajectory.shape``), the moves through the ports minutes. A table holds the moves of one
+limit set (``Planner.load``: loaded or empty). ``build_table`` plans the pairs asked of
+``table_pairs`` with a planner (one direction of each; the other is the same motion
+backwards): the ``station_pairs`` (retracted pose to retracted pose) and the ``port_pairs``
+(inside one port to inside the other, non-stop); ``save_table``/``load_table`` keep the
+table in the cache directory, one JSON file per key. The key is the SHA-256 of the cell's
+digest, the roadmap's hash, the planner's settings (all but the sample period, which only
+changes the returned samples), the limit set and the package version. The file
+(``FORMAT`` 2) stores the key, the SHA-256 of its content and each pair's plan, but no
+figure of its verification. On load the key, the format and the digest are checked, and
+every pair must be one of ``table_pairs``: a stale, foreign or corrupt file is reported
+and rebuilt, never trusted. A file may hold some pairs only (a build stopped half-way, or
+the port pairs not asked for): ``lacking`` says which of those asked for it lacks, and
+``build_table`` given the loaded table plans just those. The digest guards
 against damage, not against a deliberate edit, so every curve is then verified in full as
 if just planned (``verify``: well formed and at rest exactly on its two stations on the
 branches it names, every limit, the proof and the dense collision check over all of
@@ -42,12 +47,13 @@ import os
 from pathlib import Path
 import tempfile
 import time
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
 from wafer_planner_ros import __version__
-from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.cell.limits import LOADED
+from wafer_planner_ros.cell.stations import INSIDE, station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import path_lengths, Planner, PlanResult
 from wafer_planner_ros.trajectory.curve import Trajectory
@@ -100,6 +106,8 @@ class StationTable:
     method: str = WholeCurve.name
     """The curve method of the planner it was planned for (part of its key): what its
     answers report."""
+    load: str = LOADED
+    """The limit set its moves are planned and verified against (part of its key)."""
     basis: str = ''
     """``table_basis`` of its planner: what its plans depend on besides the stations."""
     stations: Dict[str, str] = field(default_factory=dict)
@@ -113,11 +121,12 @@ class StationTable:
         return len(self.entries)
 
     def answer(self, planner: Planner, start: str, goal: str) -> Optional[PlanResult]:
-        """Return the table's plan from ``start`` to ``goal`` as a result, or None."""
+        """Return the table's plan from ``start`` to ``goal`` as a result (its load), or None."""
         entry = self.entries.get((start, goal))
         if entry is None:
             return None
         begun = time.perf_counter()
+        planner = planner.for_load(self.load)
         lengths = self.lengths.get((start, goal))
         if lengths is None:
             lengths = self.lengths[(start, goal)] = path_lengths(planner.cell, _curve(entry))
@@ -127,11 +136,23 @@ class StationTable:
         return replace(result, timings_ms={'table': spent, 'total': spent})
 
 
+def port_pairs(cell) -> list:
+    """Return the ``station_pairs`` of two stations with ports, inside one to inside the other."""
+    return [(start + INSIDE, goal + INSIDE) for start, goal in station_pairs(cell)
+            if cell.stations[start].port is not None and cell.stations[goal].port is not None]
+
+
+def table_pairs(cell) -> list:
+    """Return every pair a table may hold: ``station_pairs``, then ``port_pairs``."""
+    return station_pairs(cell) + port_pairs(cell)
+
+
 def table_key(planner: Planner) -> str:
-    """Return the key of a planner's table (hex SHA-256)."""
+    """Return the key of a planner's table (hex SHA-256), for the planner's limit set."""
     settings = _plan_settings(planner)
     text = json.dumps({'cell': planner.cell.digest, 'roadmap': planner.roadmap.digest,
-                       'settings': settings, 'version': __version__}, sort_keys=True)
+                       'settings': settings, 'version': __version__, 'load': planner.load},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -140,8 +161,8 @@ def table_basis(planner: Planner) -> str:
     cell = {name: value for name, value in planner.cell.canonical().items()
             if name not in ('stations', 'name')}
     settings = _plan_settings(planner)
-    text = json.dumps({'cell': cell, 'settings': settings, 'version': __version__},
-                      sort_keys=True, default=_plain)
+    text = json.dumps({'cell': cell, 'settings': settings, 'version': __version__,
+                       'load': planner.load}, sort_keys=True, default=_plain)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -166,21 +187,29 @@ def table_path(cache_dir, key: str) -> Path:
 
 
 def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], None]] = None,
-                loaded: Optional[StationTable] = None) -> StationTable:
+                loaded: Optional[StationTable] = None,
+                pairs: Optional[Sequence[Tuple[str, str]]] = None) -> StationTable:
     """
-    Plan every station pair; ``progress(done, total, pair)`` after each.
+    Plan the ``pairs`` of ``table_pairs`` (default: every station pair); return the table.
+
+    Against the planner's limit set (``Planner.load``); ``progress(done, total, pair)``
+    after each pair.
 
     A pair whose reverse is already planned gets that trajectory backwards in time
     (``Trajectory.backwards``), verified again: every limit, the clearance and the proof
     are the same for a motion and its reverse, so planning both directions would take
     twice as long for the same cycle time. Given a table ``loaded`` from the cache, only
-    the pairs it rejected are planned; its entries and failures are kept.
+    the pairs it rejected or lacks are planned; its entries and failures are kept.
     """
     begun = time.perf_counter()
     entries = dict(loaded.entries) if loaded is not None else {}
     verified = dict(loaded.verified) if loaded is not None else {}
     failures = dict(loaded.failures) if loaded is not None else {}
-    pairs = [pair for pair in station_pairs(planner.cell)
+    known = set(table_pairs(planner.cell))
+    unknown = [pair for pair in pairs or () if pair not in known]
+    if unknown:
+        raise ValueError(f'{"->".join(unknown[0])} is not a pair a station table holds')
+    pairs = [pair for pair in (station_pairs(planner.cell) if pairs is None else pairs)
              if pair not in entries and pair not in failures]
     for done, (start, goal) in enumerate(pairs, 1):
         pair = (start, goal)
@@ -198,8 +227,15 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     return StationTable(table_key(planner), entries, verified, failures,
                         {} if loaded is None else dict(loaded.rejected),
                         time.perf_counter() - begun + (0.0 if loaded is None else loaded.seconds),
-                        method=planner.method.name, basis=table_basis(planner),
-                        stations=station_digests(planner.cell))
+                        method=planner.method.name, load=planner.load,
+                        basis=table_basis(planner), stations=station_digests(planner.cell))
+
+
+def lacking(table: Optional[StationTable], pairs: Sequence[Tuple[str, str]]) -> list:
+    """Return the ``pairs`` a table (None: none) neither holds nor records as not plannable."""
+    if table is None:
+        return list(pairs)
+    return [pair for pair in pairs if pair not in table.entries and pair not in table.failures]
 
 
 def save_table(table: StationTable, cache_dir) -> Path:
@@ -207,7 +243,7 @@ def save_table(table: StationTable, cache_dir) -> Path:
     path = table_path(cache_dir, table.key)
     entries = [dict(entry, pair=list(pair)) for pair, entry in sorted(table.entries.items())]
     failures = [[*pair, reason] for pair, reason in sorted(table.failures.items())]
-    document = {'key': table.key, 'version': __version__, 'format': FORMAT,
+    document = {'key': table.key, 'version': __version__, 'format': FORMAT, 'load': table.load,
                 'digest': _digest([entries, failures]), 'entries': entries,
                 'failures': failures, 'basis': table.basis, 'stations': table.stations}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -228,8 +264,9 @@ def load_table(planner: Planner, cache_dir) -> StationTable:
 
     An entry whose curve fails verification is left out and listed in ``rejected`` with the
     reason. Raise TableError if the file is unusable: missing, unreadable, for another key
-    or format, not matching its digest, naming pairs that are no station pairs, or
-    lacking some.
+    or format, not matching its digest, or naming pairs that are none of ``table_pairs``.
+    A file may lack pairs (a build that stopped half-way, or one that planned some pairs
+    only): ``lacking`` says which, ``build_table`` plans them.
     """
     begun = time.perf_counter()
     key = table_key(planner)
@@ -251,8 +288,8 @@ def load_table(planner: Planner, cache_dir) -> StationTable:
         raise TableError(f'{path} is in table format {layout}, not {FORMAT}')
     if _digest([entries, failures]) != digest:
         raise TableError(f'{path}: its content does not match its digest')
-    known = set(station_pairs(planner.cell))
-    strange = [pair for pair in pairs if pair not in known]
+    known = set(table_pairs(planner.cell))
+    strange = [pair for pair in [*pairs, *failed] if pair not in known]
     if strange:
         raise TableError(f'{path} holds {list(strange[0])}, not a station pair')
     table, verified, rejected = {}, {}, {}
@@ -267,13 +304,9 @@ def load_table(planner: Planner, cache_dir) -> StationTable:
             table[pair], verified[pair] = entry, checked
         else:
             rejected[pair] = '; '.join(checked.problems)
-    missing = known - set(table) - set(failed) - set(rejected)
-    if missing:
-        raise TableError(f'{path} lacks {len(missing)} station pairs, e.g. '
-                         f'{"->".join(sorted(missing)[0])}')
     return StationTable(key, table, verified, failed, rejected, time.perf_counter() - begun,
-                        loaded=True, method=planner.method.name, basis=table_basis(planner),
-                        stations=station_digests(planner.cell))
+                        loaded=True, method=planner.method.name, load=planner.load,
+                        basis=table_basis(planner), stations=station_digests(planner.cell))
 
 
 def inherited_table(planner: Planner, cache_dir) -> Optional[StationTable]:
@@ -286,7 +319,7 @@ def inherited_table(planner: Planner, cache_dir) -> Optional[StationTable]:
     """
     begun = time.perf_counter()
     basis, stations = table_basis(planner), station_digests(planner.cell)
-    known = set(station_pairs(planner.cell))
+    known = set(table_pairs(planner.cell))
     try:
         files = sorted(Path(cache_dir).glob('table-*.json'),
                        key=lambda path: path.stat().st_mtime, reverse=True)[:MAX_DONORS]
@@ -302,7 +335,8 @@ def inherited_table(planner: Planner, cache_dir) -> Optional[StationTable]:
             kept = {}
             for entry in document['entries']:
                 pair = tuple(str(name) for name in entry['pair'])
-                if pair in known and all(before.get(name) == stations[name] for name in pair):
+                if pair in known and all(before.get(_station(name)) == stations[_station(name)]
+                                         for name in pair):
                     kept[pair] = {name: value for name, value in entry.items() if name != 'pair'}
         except Exception as exc:  # noqa: B902 - a file that cannot be read is passed over
             logger.debug('station table: %s passed over (%s)', path, exc)
@@ -319,16 +353,19 @@ def inherited_table(planner: Planner, cache_dir) -> Optional[StationTable]:
             logger.info('station table: %d of %d pairs inherited from %s (their stations '
                         'unchanged), each verified', len(entries), len(known), path.name)
             return StationTable(table_key(planner), entries, verified,
-                                seconds=time.perf_counter() - begun,
-                                method=planner.method.name, basis=basis, stations=stations)
+                                seconds=time.perf_counter() - begun, method=planner.method.name,
+                                load=planner.load, basis=basis, stations=stations)
     return None
 
 
-def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> StationTable:
+def load_or_build_table(planner: Planner, cache_dir=None, progress=None,
+                        pairs: Optional[Sequence[Tuple[str, str]]] = None) -> StationTable:
     """
     Return the cached table, or build (and, with a cache directory, store) it.
 
-    A cached table with rejected entries has them planned again, and is stored again.
+    ``pairs``: what it must hold (default: every station pair). A cached table with rejected
+    entries has them planned again, and so has one lacking some of ``pairs``; it is then
+    stored again.
     """
     loaded = None
     if cache_dir is not None:
@@ -337,24 +374,25 @@ def load_or_build_table(planner: Planner, cache_dir=None, progress=None) -> Stat
         except TableError as exc:
             logger.info('station table: %s; building it', exc)
         else:
-            if not loaded.rejected:
+            if not loaded.rejected and not lacking(loaded, pairs or station_pairs(planner.cell)):
                 return loaded
-    return build_and_store_table(planner, cache_dir, progress, loaded=loaded)
+    return build_and_store_table(planner, cache_dir, progress, loaded=loaded, pairs=pairs)
 
 
 def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
                           warn: Callable[[str], None] = logger.warning,
-                          loaded: Optional[StationTable] = None) -> StationTable:
+                          loaded: Optional[StationTable] = None,
+                          pairs: Optional[Sequence[Tuple[str, str]]] = None) -> StationTable:
     """
-    Build the table and, with a cache directory, store it (``warn`` if that fails).
+    Build the table of ``pairs`` and, with a cache directory, store it (``warn`` if not).
 
-    Given a table ``loaded`` from the cache, only its rejected pairs are planned (see
-    ``build_table``); without one, an earlier table's entries for unchanged stations are
-    inherited (``inherited_table``) and only the other pairs planned.
+    Given a table ``loaded`` from the cache, only its rejected pairs and the ``pairs`` it
+    lacks are planned (see ``build_table``); without one, an earlier table's entries for
+    unchanged stations are inherited (``inherited_table``) and only the other pairs planned.
     """
     if loaded is None and cache_dir is not None:
         loaded = inherited_table(planner, cache_dir)
-    table = build_table(planner, progress, loaded)
+    table = build_table(planner, progress, loaded, pairs)
     if cache_dir is not None:
         try:
             save_table(table, cache_dir)
@@ -409,30 +447,33 @@ def _verified(planner: Planner, pair, entry: dict) -> Verification:
         raise ValueError(f'its curve lasts {curve.duration:.6g} s, over {MAX_DURATION:g} s')
     checked = verify(curve, planner.cell, *_ends(planner, pair, entry['branches']))
     if checked.ok:
-        _described(curve, entry)
+        _described(curve, entry, _ends(planner, pair, entry['branches'], retracted=True))
     return checked
 
 
-def _described(curve: Trajectory, entry: dict) -> dict:
+def _described(curve: Trajectory, entry: dict, retracted: list) -> dict:
     """
     Return what an answer takes from a stored entry besides its verified curve, checked.
 
     Raise ValueError unless: the initial (λ-scaled start's) cycle time is finite and no
-    shorter than the curve; the roadmap path and the path are finite (n, 3) arrays from the
-    curve's start to its end; the warnings are texts; the planning counts are numbers or
-    flags. ``MEASURED`` metrics are not read: the caller measures them.
+    shorter than the curve; the path is a finite (n, 3) array from the curve's start to its
+    end, and so is the roadmap path from the ``retracted`` ends (an end inside a port: its
+    retracted pose, where the roadmap begins); the warnings are texts; the planning counts
+    are numbers or flags. ``MEASURED`` metrics are not read: the caller measures them.
     """
     initial = float(entry['initial_cycle_time'])
     if not curve.duration <= initial < np.inf:
         raise ValueError(f'its initial cycle time {initial!r} is not a finite time at least '
                          f"the curve's {curve.duration:.6g} s")
-    paths, ends = {}, curve.evaluate([0.0, curve.duration])
-    for name in ('roadmap_path', 'path'):
+    paths = {}
+    for name, ends, what in (
+            ('roadmap_path', np.asarray(retracted), "from its stations' retracted poses"),
+            ('path', curve.evaluate([0.0, curve.duration]), "from the curve's start")):
         path = np.asarray(entry[name], float)
         if path.ndim != 2 or path.shape[1] != 3 or not 2 <= len(path) <= MAX_ITEMS \
                 or not np.all(np.isfinite(path)) \
                 or not np.allclose(path[[0, -1]], ends, rtol=0.0, atol=1e-9):
-            raise ValueError(f"its {name} is not a path from the curve's start to its end")
+            raise ValueError(f'its {name} is not a path {what} to its end')
         paths[name] = path
     warnings = entry['warnings']
     if not isinstance(warnings, list) or len(warnings) > MAX_ITEMS or not all(
@@ -449,14 +490,25 @@ def _described(curve: Trajectory, entry: dict) -> dict:
             **paths}
 
 
-def _ends(planner: Planner, pair, branches) -> list:
-    """Return the configurations of a pair's stations on the given elbow branches."""
+def _ends(planner: Planner, pair, branches, retracted: bool = False) -> list:
+    """
+    Return the configurations of a pair's ends (stations, or inside ports) on the branches.
+
+    ``retracted``: an end inside a port as its retracted pose (the end of its way out).
+    """
     ends = []
-    for name, branch in zip(pair, branches):
-        station = planner.cell.stations[name]
-        ends.append(next(c.q for c in station.configs
-                         if 'joints' in station.spec or c.elbow == branch))
+    for name, branch, role in zip(pair, branches, ('start', 'goal')):
+        end = planner.endpoint(name, role)
+        k = next(k for k, (elbow, _) in enumerate(end.configs)
+                 if elbow is None or elbow == branch)
+        way = end.way_out(k) if retracted else None
+        ends.append(end.configs[k][1] if way is None else way[-1])
     return ends
+
+
+def _station(name: str) -> str:
+    """Return the station of a pair's end: ``loadport1`` of ``loadport1:inside``."""
+    return name[:-len(INSIDE)] if name.endswith(INSIDE) else name
 
 
 def _curve(entry: dict) -> Trajectory:
@@ -468,7 +520,8 @@ def _result(planner: Planner, pair, entry: dict, verification: Verification,
             method: str, lengths: dict) -> PlanResult:
     """Return the PlanResult of a stored entry, sampled at the planner's period."""
     trajectory = _curve(entry)
-    described = _described(trajectory, entry)
+    described = _described(trajectory, entry,
+                           _ends(planner, pair, entry['branches'], retracted=True))
     start, goal = (planner.endpoint(name, role) for name, role in zip(pair, ('start', 'goal')))
     times, positions, velocities, accelerations = trajectory.samples(
         planner.settings.sample_period)
