@@ -110,8 +110,11 @@ def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends
             timeout=120).stdout)
         assert status['kernels_compiled'] == 0, status
         assert status['kernels_ahead'] > 0, status  # the set-up's build, loaded
-        # The station table is still being planned (seconds per pair): stop the node now.
-        node.wait_for('station table: 1/', 120.0)
+        # The station table is still being planned: its station pairs (seconds), then the
+        # moves through the ports (minutes each). Stop the node in the midst of one of those.
+        node.wait_for('station table (loaded): 1/', 120.0)
+        node.wait_for('station table (loaded): planning 12 pairs, e.g. loadport1:inside', 120.0)
+        time.sleep(1.0)
         seconds = node.stop(signal.SIGTERM)
     finally:
         node.process.kill()
