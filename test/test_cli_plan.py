@@ -115,6 +115,9 @@ def test_the_swap_cycle_of_every_loadport_loadlock_pair(roadmap_cache, capsys, t
         assert (back['from'], back['to'], back['load']) == (
             out_move['to'], out_move['from'], 'empty')
         assert back['branches'] == out_move['branches'][::-1]  # the cycle repeats
+        # Never slower back empty than out loaded: the way out backwards verifies empty.
+        assert back['cycle_time'] <= out_move['cycle_time']
+        assert back['adopted'] == (back['cycle_time'] == out_move['cycle_time'])
         assert row['cycle'] == pytest.approx(out_move['cycle_time'] + back['cycle_time'])
         chain = row['stop_and_go_moves']
         assert [m['load'] for m in chain] == ['loaded'] * 6

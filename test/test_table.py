@@ -389,3 +389,31 @@ def test_a_port_entry_turned_askew_is_rejected_never_published(
     assert re.search(r'the wafer inside a port reaches [0-9.]+ x its heading tolerance',
                      loaded.rejected[pair]), loaded.rejected[pair]
     assert set(loaded.entries) == set(table.entries) - {pair}
+
+
+def test_a_donor_tables_faster_curve_is_taken_only_when_it_verifies(planner, default_cell,
+                                                                    default_roadmap):
+    """The loaded moves' curves serve the empty table where faster; never the other way."""
+    pairs = [('loadport1', 'loadlock2'), ('loadlock2', 'loadport1')]
+    fast = build_table(planner.for_load(EMPTY), pairs=pairs)  # knot timing, empty
+    slow = Planner(default_cell, default_roadmap, PlannerSettings.paper()).for_load(EMPTY)
+    taken = build_table(slow, pairs=pairs, donor=fast)  # the paper's timing is slower
+    for pair in pairs:
+        answer, donated = taken.answer(slow, *pair), fast.answer(planner, *pair)
+        assert answer.metrics['adopted'] and answer.load == EMPTY
+        assert answer.cycle_time == donated.cycle_time < slow.plan(*pair).cycle_time
+        assert answer.verification.ok
+    # The empty curves break the wafer limit: a loaded table never takes them.
+    kept = build_table(planner, pairs=pairs, donor=fast)
+    for pair in pairs:
+        answer = kept.answer(planner, *pair)
+        assert 'adopted' not in answer.metrics and answer.load == LOADED
+        assert answer.cycle_time > fast.answer(planner, *pair).cycle_time
+        assert planner.adopted(fast.answer(planner, *pair)) is None
+    # Adopted backwards: from the other's goal to its start, on its branches reversed.
+    there = planner.plan(*pairs[0])
+    back = planner.for_load(EMPTY).adopted(there, backwards=True)
+    assert (back.start.label, back.goal.label) == pairs[1] and back.load == EMPTY
+    assert back.branches == there.branches[::-1] and back.metrics['reversed']
+    assert np.array_equal(back.positions[0], there.goal_q)
+    assert np.array_equal(back.positions[-1], there.start_q)

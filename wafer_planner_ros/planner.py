@@ -408,6 +408,48 @@ class Planner:
                                 'failed verification: ' + '; '.join(checked.problems))
         return checked
 
+    def adopted(self, other: PlanResult, backwards: bool = False) -> Optional[PlanResult]:
+        """
+        Return another answer's motion as this planner's answer if it passes its verification.
+
+        ``backwards``: the motion reversed in time, from ``other``'s goal to its start. A
+        curve planned against one limit set answers a request of another whenever it passes
+        that one's verification in full (every limit, the ports, the proof, the dense
+        collision check): a loaded move, say, for an empty request whose own optimised
+        curve came out slower (the optimiser is local; the empty set has every freedom the
+        loaded one has). Its metrics say ``adopted``. None when it does not pass.
+        """
+        trajectory = other.trajectory.backwards() if backwards else other.trajectory
+        start_q, goal_q = (other.goal_q, other.start_q) if backwards else \
+            (other.start_q, other.goal_q)
+        checked = verify(trajectory, self.cell, start_q, goal_q)
+        if not checked.ok:
+            return None
+        times, positions, velocities, accelerations = trajectory.samples(
+            self.settings.sample_period)
+        order = slice(None, None, -1 if backwards else 1)
+        return replace(
+            other, start=other.goal if backwards else other.start,
+            goal=other.start if backwards else other.goal, start_q=start_q, goal_q=goal_q,
+            branches=tuple(other.branches[order]), load=self.load, trajectory=trajectory,
+            verification=checked, times=times, positions=positions, velocities=velocities,
+            accelerations=accelerations, roadmap_path=np.asarray(other.roadmap_path)[order],
+            path=np.asarray(other.path)[order],
+            metrics=dict(other.metrics, adopted=True, branches=list(other.branches[order]))
+            | ({'reversed': not other.metrics.get('reversed', False)} if backwards else {}))
+
+    def faster(self, result: Optional[PlanResult], other: Optional[PlanResult],
+               backwards: bool = False) -> Optional[PlanResult]:
+        """
+        Return ``result``, or ``other`` as this planner's answer (``adopted``) if faster.
+
+        ``other`` is taken when it is shorter than ``result`` (or ``result`` is None) and
+        passes this planner's verification; ``backwards``: ``other`` reversed in time.
+        """
+        if other is None or (result is not None and result.cycle_time <= other.cycle_time):
+            return result
+        return self.adopted(other, backwards) or result
+
     def _result(self, candidate: '_Candidate', checked: Verification, counts: dict,
                 timings_ms: dict) -> PlanResult:
         """Return the verified candidate sampled and measured."""

@@ -120,9 +120,11 @@ def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, S
 
         logger.info(f'station table ({load}): planning {len(missing)} pairs, e.g. '
                     f'{"->".join(missing[0])}')
+        # The empty moves take the loaded one's curve where that is faster (and verifies).
+        donor = tables.get(LOADED) if load == EMPTY else None
         table = tables[load] = build_and_store_table(
             whole_curve(planner).for_load(load), settings.cache_dir, progress,
-            logger.warning, tables.get(load), pairs)
+            logger.warning, tables.get(load), pairs, donor)
         _report(table, logger)
         publish(load, table)
 

@@ -188,7 +188,8 @@ def table_path(cache_dir, key: str) -> Path:
 
 def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], None]] = None,
                 loaded: Optional[StationTable] = None,
-                pairs: Optional[Sequence[Tuple[str, str]]] = None) -> StationTable:
+                pairs: Optional[Sequence[Tuple[str, str]]] = None,
+                donor: Optional[StationTable] = None) -> StationTable:
     """
     Plan the ``pairs`` of ``table_pairs`` (default: every station pair); return the table.
 
@@ -199,7 +200,10 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     (``Trajectory.backwards``), verified again: every limit, the clearance and the proof
     are the same for a motion and its reverse, so planning both directions would take
     twice as long for the same cycle time. Given a table ``loaded`` from the cache, only
-    the pairs it rejected or lacks are planned; its entries and failures are kept.
+    the pairs it rejected or lacks are planned; its entries and failures are kept. Given
+    the table of another limit set, ``donor`` (the loaded moves' for the empty ones), its
+    curve of a pair is taken instead when it is faster than the one planned and passes
+    this planner's verification (``Planner.faster``).
     """
     begun = time.perf_counter()
     entries = dict(loaded.entries) if loaded is not None else {}
@@ -217,6 +221,8 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
             back = entries.get((goal, start))
             if back is None:
                 result = planner.plan(start, goal)
+                if donor is not None and pair in donor.entries:
+                    result = planner.faster(result, donor.answer(planner, start, goal))
                 entries[pair], verified[pair] = _entry(result), result.verification
             else:
                 entries[pair], verified[pair] = _reversed(planner, pair, back)
@@ -382,17 +388,19 @@ def load_or_build_table(planner: Planner, cache_dir=None, progress=None,
 def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
                           warn: Callable[[str], None] = logger.warning,
                           loaded: Optional[StationTable] = None,
-                          pairs: Optional[Sequence[Tuple[str, str]]] = None) -> StationTable:
+                          pairs: Optional[Sequence[Tuple[str, str]]] = None,
+                          donor: Optional[StationTable] = None) -> StationTable:
     """
     Build the table of ``pairs`` and, with a cache directory, store it (``warn`` if not).
 
     Given a table ``loaded`` from the cache, only its rejected pairs and the ``pairs`` it
     lacks are planned (see ``build_table``); without one, an earlier table's entries for
     unchanged stations are inherited (``inherited_table``) and only the other pairs planned.
+    ``donor``: see ``build_table``.
     """
     if loaded is None and cache_dir is not None:
         loaded = inherited_table(planner, cache_dir)
-    table = build_table(planner, progress, loaded, pairs)
+    table = build_table(planner, progress, loaded, pairs, donor)
     if cache_dir is not None:
         try:
             save_table(table, cache_dir)
@@ -402,9 +410,10 @@ def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
 
 
 def _entry(result: PlanResult) -> dict:
-    """Return what the table keeps of a plan (plain data)."""
+    """Return what the table keeps of a plan (plain data; an answer's ``source`` is not)."""
+    metrics = {name: value for name, value in result.metrics.items() if name != 'source'}
     return _stored(result.branches, result.trajectory, result.initial_cycle_time,
-                   result.roadmap_path, result.path, result.metrics, result.warnings,
+                   result.roadmap_path, result.path, metrics, result.warnings,
                    result.timings_ms['total'])
 
 
