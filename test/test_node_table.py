@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 from tampered import tamper
 
-from wafer_planner_ros.cell.limits import LOADS
+from wafer_planner_ros.cell.limits import EMPTY, LOADED, LOADS
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_table, load_table, save_table, table_key
-from wafer_planner_ros.service.table import table_pairs, table_path
+from wafer_planner_ros.service.table import port_pairs, table_pairs, table_path
 
 
 @pytest.mark.slow
@@ -130,3 +131,38 @@ def test_the_moves_through_the_ports_are_answered_from_the_tables_loaded_and_emp
             assert got['certified'] == 'True'
     finally:
         node.close()
+
+
+def test_the_tables_are_planned_group_by_group_each_pair_stored_and_published(
+        tmp_path, default_cell, default_roadmap):
+    """A pair is answered from the table as soon as it is planned; a restart goes on."""
+    from wafer_planner_ros.node.serving import build_station_tables, table_groups
+    from wafer_planner_ros.node.serving import table_to_plan
+    ports = settings_from({'roadmap.cache_dir': str(tmp_path)})
+    whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    stations, through = station_pairs(default_cell), port_pairs(default_cell)
+    assert table_groups(whole, ports) == [(LOADED, stations), (EMPTY, stations),
+                                          (LOADED, through), (EMPTY, through)]
+    settings = replace(ports, station_table_ports=False)
+    assert table_groups(whole, settings) == [(LOADED, stations)]
+    # Half the table cached (a build stopped half-way): only the other half is planned.
+    half = build_table(Planner(default_cell, default_roadmap), pairs=stations[:6])
+    save_table(replace(half, key=table_key(whole)), tmp_path)
+    cached = {LOADED: load_table(whole, tmp_path)}
+    assert table_to_plan(whole, cached, settings) and len(cached[LOADED]) == 6
+    published = []
+
+    def publish(load, table):
+        stored = load_table(whole.for_load(load), tmp_path)  # on disk before it is used
+        published.append((load, len(table), len(stored)))
+
+    build_station_tables(whole, settings, _Quiet(), cached, publish)
+    assert published == [(LOADED, 6 + k, 6 + k) for k in range(1, 7)]
+    assert not table_to_plan(whole, {LOADED: load_table(whole, tmp_path)}, settings)
+
+
+class _Quiet:
+    def info(self, text):
+        pass
+
+    warning = info

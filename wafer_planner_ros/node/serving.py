@@ -9,9 +9,9 @@ out those that fail, and hands it all over as a ``Serving``: a
 ready. What the tables lack of what they are to hold (``table_groups``: the station pairs
 loaded; with ``planning.station_table_ports`` also empty, then the port pairs loaded and
 empty), or rejected, is planned then, group by group (``build_station_tables``;
-``table_to_plan`` says whether), each table stored and handed to the service as each
-group is planned: the quick station pairs are answered from the table within seconds, the
-port pairs minutes later. How a request is answered is the service's to say.
+``table_to_plan`` says whether), the table stored and handed to the service as each pair
+is planned: the quick station pairs are answered from the table within seconds, each port
+pair minutes later. How a request is answered is the service's to say.
 """
 
 from dataclasses import dataclass
@@ -103,9 +103,11 @@ def table_to_plan(planner: Planner, tables: Dict[str, StationTable], settings) -
 def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, StationTable],
                          publish: Callable[[str, StationTable], None]) -> None:
     """
-    Plan what the station tables lack, group by group (``table_groups``), storing each.
+    Plan what the station tables lack, group by group (``table_groups``), pair by pair.
 
-    ``tables``: those loaded; ``publish(load, table)`` after each group planned.
+    ``tables``: those loaded; after each pair the table is stored and handed on,
+    ``publish(load, table)``: a pair is answered from the table as soon as it is planned
+    (the moves through the ports take minutes each).
     """
     tables = dict(tables)
     for load, pairs in table_groups(planner, settings):
@@ -113,20 +115,18 @@ def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, S
         if not missing:
             continue
         begun = time.monotonic()
-
-        def progress(done: int, total: int, pair: str, load=load, begun=begun) -> None:
-            logger.info(f'station table ({load}): {done}/{total} pairs planned ({pair}, '
-                        f'{time.monotonic() - begun:.1f} s)')
-
         logger.info(f'station table ({load}): planning {len(missing)} pairs, e.g. '
                     f'{"->".join(missing[0])}')
         # The empty moves take the loaded one's curve where that is faster (and verifies).
         donor = tables.get(LOADED) if load == EMPTY else None
-        table = tables[load] = build_and_store_table(
-            whole_curve(planner).for_load(load), settings.cache_dir, progress,
-            logger.warning, tables.get(load), pairs, donor)
+        for done, pair in enumerate(missing, 1):
+            table = tables[load] = build_and_store_table(
+                whole_curve(planner).for_load(load), settings.cache_dir, None,
+                logger.warning, tables.get(load), [pair], donor)
+            publish(load, table)
+            logger.info(f'station table ({load}): {done}/{len(missing)} pairs planned '
+                        f'({"->".join(pair)}, {time.monotonic() - begun:.1f} s)')
         _report(table, logger)
-        publish(load, table)
 
 
 def _report(table: StationTable, logger) -> None:
