@@ -135,7 +135,7 @@ def main() -> int:
                              '--ros-args', '-p', 'planning.timeout:=60.0',
                              '-p', f'planning.max_queue:={BURST + 10}',
                              # the station pairs only: the moves through the ports take
-                             # tens of minutes to plan, and would share the cores meanwhile
+                             # an hour or more to plan, and would share the cores meanwhile
                              '-p', 'planning.station_table_ports:=false',
                              '-p', f'roadmap.cache_dir:={cache}',
                              '-p', f'recording.directory:={recordings}'],
