@@ -21,7 +21,9 @@ optimal-control figure of the same move (direct collocation with IPOPT, every jo
 wafer limit including jerk, the port model of the cell file). Writes
 ``results/ports-<cell name>.json``.
 
-Run: ``python bench/bench_ports.py [CELL_FILE ...]`` (default: the three cells).
+Run: ``python bench/bench_ports.py [CELL_FILE ...]`` (default: the three cells), or
+``python bench/bench_ports.py CELL_FILE --pair LOADPORT LOADLOCK`` to plan one pair again and
+replace its row (and the medians) in the cell's results file.
 """
 
 import json
@@ -96,7 +98,13 @@ def pair_row(planner, corridor, loadport, loadlock) -> dict:
 
 def main(argv=None) -> int:
     """Plan every cell's pairs (or those of the cell files named) and write the results."""
-    named = sys.argv[1:] if argv is None else argv
+    named = list(sys.argv[1:] if argv is None else argv)
+    only = None
+    if '--pair' in named:
+        k = named.index('--pair')
+        only, named = tuple(named[k + 1:k + 3]), named[:k] + named[k + 3:]
+        if len(only) != 2 or len(named) != 1:
+            raise SystemExit('usage: bench_ports.py CELL_FILE --pair LOADPORT LOADLOCK')
     cells = [Path(p) for p in named] or [default_cell_path()] + sorted(
         (HERE.parent / 'test' / 'cells').glob('*.yaml'))
     for path in cells:
@@ -106,10 +114,16 @@ def main(argv=None) -> int:
         corridor = Planner(cell, roadmap, PlannerSettings(method=KnotTiming))
         # The default cell: the pairs with an optimal-control figure.
         pairs = list(OPTIMAL) if cell.name == DEFAULT_CELL else loadport_loadlock_pairs(cell)
-        rows = []
+        written = RESULTS / f'ports-{cell.name}.json'
+        rows = [] if only is None else json.loads(written.read_text())['pairs']
         for loadport, loadlock in pairs:
+            if only is not None and (loadport, loadlock) != only:
+                continue
             row = pair_row(planner, corridor, loadport, loadlock)
-            rows.append(row)
+            if only is None:
+                rows.append(row)
+            else:
+                rows = [row if (r['loadport'], r['loadlock']) == only else r for r in rows]
             errors = [m['error'] for m in row['moves'] if m['error']]
             print(f"{cell.name} {loadport} <-> {loadlock}: non-stop out {row['non_stop']} s "
                   f"(x {row.get('over_optimal_control', float('nan')):.3f} of the limit, "
@@ -131,7 +145,6 @@ def main(argv=None) -> int:
             'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows])),
             'machine': {'python': platform.python_version(), 'cpus': os.cpu_count()}}
         RESULTS.mkdir(exist_ok=True)
-        written = RESULTS / f'ports-{cell.name}.json'
         written.write_text(json.dumps(report, indent=1) + '\n')
         print(f'wrote {written}')
     return 0

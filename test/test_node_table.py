@@ -141,10 +141,11 @@ def test_the_tables_are_planned_group_by_group_each_pair_stored_and_published(
     ports = settings_from({'roadmap.cache_dir': str(tmp_path)})
     whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
     stations, through = station_pairs(default_cell), port_pairs(default_cell)
-    assert table_groups(whole, ports) == [(LOADED, stations), (EMPTY, stations),
-                                          (LOADED, through), (EMPTY, through)]
+    assert table_groups(whole, ports) == [
+        (LOADED, stations, False), (EMPTY, stations, False), (LOADED, through, True),
+        (EMPTY, through, True), (LOADED, through, False), (EMPTY, through, False)]
     settings = replace(ports, station_table_ports=False)
-    assert table_groups(whole, settings) == [(LOADED, stations)]
+    assert table_groups(whole, settings) == [(LOADED, stations, False)]
     # Half the table cached (a build stopped half-way): only the other half is planned.
     half = build_table(Planner(default_cell, default_roadmap), pairs=stations[:6])
     save_table(replace(half, key=table_key(whole)), tmp_path)

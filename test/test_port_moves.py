@@ -11,6 +11,7 @@ from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
+from wafer_planner_ros.trajectory.stops import stopping_curve
 import yaml
 
 
@@ -55,6 +56,39 @@ def test_a_move_from_inside_a_port_to_inside_another_passes_the_independent_chec
     ports = [p.station for p in cell.port_model.ports]
     assert where[0] == ports.index(loadport) and where[-1] == ports.index(loadlock)
     assert 0.0 < ratios['port_lateral'] <= 1.0 and ratios['port_heading'] <= 1.0
+
+
+def test_a_move_through_the_ports_is_never_slower_than_stopping_at_their_mouths(
+        cell, roadmap_cache):
+    planner, info = _planner(cell, roadmap_cache)
+    loadport, loadlock = _ports_first_loadport_to_loadlock(cell)
+    start, goal = f'{loadport}:inside', f'{loadlock}:inside'
+    result = planner.plan(start, goal)
+    # The same move as a controller without non-stop moves makes it: retract, transfer and
+    # extend, each from rest to rest, on every elbow branch that reaches into the ports,
+    # joined into one curve.
+    chains = []
+    for elbow_a, _ in planner.endpoint(start, 'start').configs:
+        for elbow_b, _ in planner.endpoint(goal, 'goal').configs:
+            legs = [planner.plan(start, loadport, branches=(elbow_a, elbow_a)),
+                    planner.plan(loadport, loadlock, branches=(elbow_a, elbow_b)),
+                    planner.plan(loadlock, goal, branches=(elbow_b, elbow_b))]
+            assert all(leg.metrics['stops'] == 0 for leg in legs)  # one leg each
+            chains.append(stopping_curve([leg.trajectory for leg in legs], cell.robot,
+                                         planner.settings.timing).duration)
+    assert result.cycle_time <= min(chains)
+    assert result.timings_ms['stopping'] > 0.0
+    if result.metrics['stops']:
+        # Stopping was the faster: the answer is at rest at both port mouths, and sound.
+        assert result.metrics['stops'] == 2
+        assert _mouth_speed(cell, result, loadport) < 1e-3
+        assert _mouth_speed(cell, result, loadlock) < 1e-3
+        check(cell, plan_json(result, info, cell.robot.joint_names), result.start_q,
+              result.goal_q)
+        assert result.verification.ok and result.cycle_time == pytest.approx(min(chains))
+    # Within a time budget the legs would not fit: no chain is planned.
+    budgeted = planner.plan(start, goal, budget=0.1)
+    assert budgeted.metrics['stops'] == 0 and budgeted.timings_ms['stopping'] == 0.0
 
 
 def test_joint_angles_inside_a_port_are_a_pose_inside_it(default_cell, roadmap_cache):
@@ -111,6 +145,7 @@ def test_the_whole_curve_leaves_and_enters_the_ports_without_stopping(default_ce
     check(default_cell, plan_json(result, info, default_cell.robot.joint_names),
           result.start_q, result.goal_q)
     assert result.metrics['optimised'] and result.verification.ok
+    assert result.metrics['stops'] == 0
     # The corridor curve stops at both retracted poses; the whole curve does not.
     stopping = stop_and_go.plan(start, goal)
     assert _mouth_speed(default_cell, stopping, 'loadport2') < 1e-3

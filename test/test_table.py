@@ -14,6 +14,7 @@ from tampered import digest, tamper
 from wafer_planner_ros.cell.limits import EMPTY, LOADED
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
@@ -22,8 +23,10 @@ from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_and_store_table, inherited_table
 from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
-from wafer_planner_ros.service.table import lacking, port_pairs, save_table, table_key
+from wafer_planner_ros.service.table import lacking, port_pairs, provisional, save_table
+from wafer_planner_ros.service.table import table_key
 from wafer_planner_ros.service.table import table_pairs, table_path, TableError
+from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.verify import verify
 
 _Request = namedtuple('_Request', 'start goal')
@@ -353,6 +356,8 @@ def test_the_table_holds_the_moves_through_the_ports_loaded_and_empty(
         save_table(table, tmp_path)
         loaded = load_table(planner.for_load(load), tmp_path)
         assert loaded.loaded and not loaded.rejected and set(loaded.entries) == set(ports)
+        # Moves that stop at the port mouths (stopping was faster) are kept like any other.
+        assert any(entry['metrics']['stops'] == 2 for entry in loaded.entries.values())
         for start, goal in ports:
             answer = loaded.answer(planner, start, goal)  # the table's load, whatever asks
             assert answer.load == load and answer.metrics['source'] == 'table'
@@ -375,6 +380,34 @@ def test_the_table_holds_the_moves_through_the_ports_loaded_and_empty(
     assert alone.answer(*request).metrics.get('source') != 'table'
     with pytest.raises(ValueError, match='loadport1->loadport2 is not a pair'):
         build_table(planner, pairs=[('loadport1', 'loadport2')])
+
+
+def test_the_moves_through_the_ports_stop_at_their_mouths_first_then_are_planned_in_full(
+        planner, default_cell, tmp_path):
+    """A quick provisional table through the ports, answered from, then replaced in full."""
+    ports = port_pairs(default_cell)
+
+    def duration(entry):
+        return Trajectory.from_description(entry['trajectory']).duration
+
+    quick = build_table(planner, pairs=ports, stopping=True)
+    assert set(quick.entries) == set(ports) and not quick.failures
+    assert all(provisional(entry) and entry['metrics']['stops'] == 2
+               for entry in quick.entries.values())
+    save_table(quick, tmp_path)
+    loaded = load_table(planner, tmp_path)  # verified in full like any entry
+    assert not loaded.rejected and all(map(provisional, loaded.entries.values()))
+    assert lacking(loaded, ports, stopping=True) == [] and lacking(loaded, ports) == ports
+    answer = loaded.answer(planner, *ports[0])
+    assert answer.metrics['provisional'] and answer.verification.ok
+    full = build_table(planner, loaded=loaded, pairs=ports)
+    assert lacking(full, ports) == [] and not any(map(provisional, full.entries.values()))
+    for pair in ports:  # never slower than stopping
+        assert duration(full.entries[pair]) <= duration(quick.entries[pair])
+    with pytest.raises(PlanningError) as info:
+        planner.stop_and_go('loadport1', 'loadlock1')
+    assert info.value.code is ErrorCode.INVALID_REQUEST and 'does not stop' in \
+        info.value.message
 
 
 def test_a_port_entry_turned_askew_is_rejected_never_published(

@@ -6,13 +6,16 @@ a station allows both elbow branches every combination is planned and the one wi
 shortest cycle time is returned; a combination that cannot win is given up before it is
 optimised when even its joints' fastest rest-to-rest motions
 (``JointLimits.shortest_motion``) take longer than the best so far, and part-way when its
-optimisation shows it (the methods' ``give_up_above``). Every returned
-trajectory has passed ``verify``; a request that cannot be answered raises
-``PlanningError`` with its code.
+optimisation shows it (the methods' ``give_up_above``). A move into or out of a port,
+planned without a time budget, is never slower than stopping at the port mouths: that
+stop-and-go chain is planned first (``Planner.stop_and_go``), and it is the bound every
+combination must beat and the answer when none does. Every returned trajectory has passed
+``verify``; a request that cannot be answered raises ``PlanningError`` with its code.
 """
 
 from dataclasses import dataclass, field, replace
 import logging
+import threading
 import time
 from typing import Mapping, Optional, Tuple, Type
 
@@ -30,19 +33,25 @@ from wafer_planner_ros.trajectory.corridor import build_corridor, simplify, thro
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import CurveMethod, Draft, KnotTiming, METHODS
 from wafer_planner_ros.trajectory.methods import Shaped
+from wafer_planner_ros.trajectory.stops import stopping_curve
 from wafer_planner_ros.trajectory.stopwatch import collecting, PARTS
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 logger = logging.getLogger(__name__)
 
-STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify')
-"""The stages of a plan, timed in its ``timings_ms`` (with ``PARTS`` of them and ``total``)."""
+STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify', 'stopping')
+"""The stages of a plan, timed in its ``timings_ms`` (with ``PARTS`` of them and ``total``);
+``stopping``: the stop-and-go chain of a move through a port, its legs planned, joined and
+verified (``Planner._stopping``)."""
 
 KNOWN_LISTED = 10
 """The stations an UNKNOWN_STATION message lists (then how many more there are)."""
 MAX_QUOTED = 200
 """Most characters of a requested station name quoted in a message."""
+LEGS_KEPT = 64
+"""The stop-and-go legs a planner keeps (``Planner._leg``): every retract and extend of 16
+stations with ports on both elbow branches, with 32 transfers between them."""
 SAMPLE_PERIOD_RANGE = (0.001, 1.0)
 """s: the shortest and longest step between returned samples (the verification's is 1 ms)."""
 
@@ -161,6 +170,9 @@ class Planner:
         self.settings = settings
         self.method = settings.method(cell, settings.timing, settings.shape)
         self._by_load = {cell.robot.load: self}
+        self._legs: dict = {}
+        """The stop-and-go legs planned so far (``_leg``), at most ``LEGS_KEPT``."""
+        self._legs_lock = threading.Lock()
 
     @property
     def load(self) -> str:
@@ -286,6 +298,16 @@ class Planner:
         if branches is not None:
             a, b = (_only_branch(end, elbow, role) for end, elbow, role in
                     ((a, branches[0], 'start'), (b, branches[1], 'goal')))
+        return self._planned(a, b, deadline, until, begun)
+
+    def _planned(self, a: Endpoint, b: Endpoint, deadline: Optional[float],
+                 until: Optional[float], begun: float, stopping: bool = True) -> PlanResult:
+        """
+        Return the fastest verified answer between two resolved ends (``plan``).
+
+        ``stopping``: whether a request through a port also plans its stop-and-go chain
+        (``_stopping``), the bound every non-stop combination must beat.
+        """
         stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
         prepared, failure = [], None
         for i, (elbow_a, qa) in enumerate(a.configs):
@@ -302,12 +324,14 @@ class Planner:
                 except PlanningError as exc:
                     logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
                     failure = failure or exc
+        stops = self._stopping(a, b, deadline, until, stage_ms)[0] if stopping else None
+        bound = None if stops is None else stops.cycle_time
         # Most promising first (the method's starting point), so that a combination whose
         # optimisation shows it cannot beat the best so far is given up early.
         candidates, given_up = [], []
         for pair in sorted(prepared, key=lambda p: p.draft.estimate):
             _check_deadline(deadline)
-            best = min((c.shaped.trajectory.duration for c in candidates), default=None)
+            best = min((c.shaped.trajectory.duration for c in candidates), default=bound)
             if best is not None and pair.fastest >= best:
                 logger.debug('branches %s take at least %.3f s, the best so far %.3f s; '
                              'given up', pair.branches, pair.fastest, best)
@@ -341,14 +365,143 @@ class Planner:
                         checked = None
                     if checked is None:
                         continue
-                counts = {'candidates': len(prepared), 'given_up': len(given_up)}
-                return self._result(candidate, checked, counts, dict(
-                    stage_ms, total=(time.perf_counter() - begun) * 1000.0))
+                if stops is None or candidate.shaped.trajectory.duration < stops.cycle_time:
+                    counts = {'candidates': len(prepared), 'given_up': len(given_up)}
+                    return self._result(candidate, checked, counts, dict(
+                        stage_ms, total=(time.perf_counter() - begun) * 1000.0))
+                given_up = []  # the fastest verified curve is no faster than stopping
+                break
             # Every faster one failed verification: finish those given up after all.
-            candidates = [self._finished(pair, None, stage_ms, until, deadline)
-                          for pair in given_up]
+            candidates = [c for c in (self._finished(pair, bound, stage_ms, until, deadline)
+                                      for pair in given_up) if c is not None]
             given_up = []
+        if stops is not None:
+            return replace(stops, metrics=dict(stops.metrics, candidates=len(prepared)),
+                           timings_ms=dict(stage_ms,
+                                           total=(time.perf_counter() - begun) * 1000.0))
         raise failure
+
+    def stop_and_go(self, start, goal, deadline: Optional[float] = None,
+                    load: Optional[str] = None) -> PlanResult:
+        """
+        Return the move through a port that stops at the port's mouth, verified (``_stopping``).
+
+        What ``plan`` returns when no non-stop curve is faster, without looking for one: its
+        legs are short moves into or out of a port and a move between retracted poses, so it
+        takes seconds where ``plan`` may take minutes. Raises PlanningError: INVALID_REQUEST
+        when neither end is inside a port or the move is a single leg, else the first reason
+        no chain could be planned.
+        """
+        if load is not None and load != self.load:
+            return self.for_load(load).stop_and_go(start, goal, deadline)
+        begun = time.perf_counter()
+        a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
+        stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
+        result, failure = self._stopping(a, b, deadline, None, stage_ms)
+        if result is None:
+            raise failure or PlanningError(
+                ErrorCode.INVALID_REQUEST, f'{a.label} -> {b.label} does not stop on its way: '
+                'neither end is inside a port, or it only leaves (enters) one')
+        return replace(result, timings_ms=dict(stage_ms,
+                                               total=(time.perf_counter() - begun) * 1000.0))
+
+    def _stopping(self, a: Endpoint, b: Endpoint, deadline: Optional[float],
+                  until: Optional[float], stage_ms: dict) -> tuple:
+        """
+        Return (the fastest stop-and-go answer of a request through a port or None, why not).
+
+        Into or out of a port a move can always stop at the port's mouth: retract to the
+        retracted pose, transfer, extend, each leg planned from rest to rest on the request's
+        elbow branches (``_planned``, without stops of its own), then joined into one curve
+        that stops where they meet (``stops.stopping_curve``) and verified like any other.
+        The fastest over the elbow-branch combinations is what every non-stop curve must
+        beat: so a move through a port is never slower than stopping on its way. None when
+        neither end is inside a port, when the request is a single leg (a retract to its
+        own retracted pose), within a time budget (``until``: the legs would not fit in
+        it), or when no chain could be planned (then with the first PlanningError of a leg,
+        or VERIFICATION_FAILED). Its time goes to ``stage_ms['stopping']``.
+        """
+        if until is not None or not (a.ways_out or b.ways_out):
+            return None, None
+        clock = _Clock(stage_ms)
+        best, failure = None, None
+        for i, (elbow_a, qa) in enumerate(a.configs):
+            for j, (elbow_b, qb) in enumerate(b.configs):
+                ends = _stops(a, i, 'start') + _stops(b, j, 'goal')[::-1]
+                ends = [e for k, e in enumerate(ends) if k == 0
+                        or not np.array_equal(e.configs[0][1], ends[k - 1].configs[0][1])]
+                if len(ends) < 3:
+                    continue  # one leg: the request itself
+                try:
+                    chain = [self._leg(start, goal, deadline)
+                             for start, goal in zip(ends, ends[1:])]
+                except PlanningError as exc:
+                    logger.debug('branches %s -> %s: no stop-and-go chain: %s', elbow_a,
+                                 elbow_b, exc)
+                    failure = failure or exc
+                    continue
+                result = self._joined(a, b, i, j, chain)
+                if result is None:
+                    failure = failure or PlanningError(
+                        ErrorCode.VERIFICATION_FAILED, f'the stop-and-go chain {a.label} -> '
+                        f'{b.label} failed verification')
+                elif best is None or result.cycle_time < best.cycle_time:
+                    best = result
+        clock.lap('stopping')
+        return best, failure
+
+    def _leg(self, start: Endpoint, goal: Endpoint, deadline: Optional[float]) -> PlanResult:
+        """
+        Return the leg from ``start`` to ``goal``, each of one configuration, planned once.
+
+        A retract or extend serves every move through its port (the station table's six
+        loaded pairs of the default cell need 10 of them, not 24): the last ``LEGS_KEPT``
+        are kept, by their ends' configurations (and ways out).
+        """
+        key = tuple((end.configs[0][0], end.configs[0][1].tobytes(),
+                     None if end.way_out(0) is None else end.way_out(0).tobytes())
+                    for end in (start, goal))
+        with self._legs_lock:
+            leg = self._legs.get(key)
+        if leg is None:
+            leg = self._planned(start, goal, deadline, None, time.perf_counter(),
+                                stopping=False)
+            with self._legs_lock:
+                if len(self._legs) >= LEGS_KEPT:
+                    del self._legs[next(iter(self._legs))]
+                self._legs[key] = leg
+        return leg
+
+    def _joined(self, a: Endpoint, b: Endpoint, i: int, j: int,
+                chain: list) -> Optional[PlanResult]:
+        """Return the legs joined into one verified answer from ``a`` to ``b``, else None."""
+        trajectory = stopping_curve([leg.trajectory for leg in chain], self.cell.robot,
+                                    self.settings.timing)
+        qa, qb = a.configs[i][1], b.configs[j][1]
+        checked = verify(trajectory, self.cell, qa, qb)
+        if not checked.ok:
+            logger.warning('the stop-and-go chain %s -> %s failed verification: %s', a.label,
+                           b.label, '; '.join(checked.problems))
+            return None
+        times, positions, velocities, accelerations = trajectory.samples(
+            self.settings.sample_period)
+        transfer = chain[1] if a.way_out(i) is not None else chain[0]
+        path = np.concatenate([chain[0].path] + [leg.path[1:] for leg in chain[1:]])
+        branches = (a.configs[i][0], b.configs[j][0])
+        return PlanResult(
+            start=a, goal=b, start_q=qa, goal_q=qb, branches=branches, load=self.load,
+            trajectory=trajectory,
+            initial_cycle_time=max(sum(leg.initial_cycle_time for leg in chain),
+                                   trajectory.duration),
+            verification=checked, times=times, positions=positions, velocities=velocities,
+            accelerations=accelerations, roadmap_path=transfer.roadmap_path, path=path,
+            metrics=dict(method=self.method.name, stops=len(chain) - 1,
+                         legs_cycle_time=sum(leg.cycle_time for leg in chain),
+                         roadmap_path_vertices=len(transfer.roadmap_path),
+                         path_vertices=len(path),
+                         control_points=len(trajectory.control_points),
+                         branches=list(branches), **path_lengths(self.cell, trajectory)),
+            warnings=sum((leg.warnings for leg in chain), ()))
 
     def _prepared(self, a, b, start, goal, branches, stage_ms) -> '_Prepared':
         """
@@ -457,7 +610,7 @@ class Planner:
         metrics = dict(
             candidate.shaped.metrics, method=self.method.name,
             roadmap_path_vertices=len(pair.roadmap_path), path_vertices=len(pair.path),
-            control_points=pair.control_points, branches=list(pair.branches),
+            control_points=pair.control_points, branches=list(pair.branches), stops=0,
             **path_lengths(self.cell, trajectory), **counts)
         times, positions, velocities, accelerations = trajectory.samples(
             self.settings.sample_period)
@@ -532,6 +685,23 @@ def _only_branch(end: Endpoint, elbow, role: str) -> Endpoint:
                             f'{[c[0] for c in end.configs]})')
     return replace(end, configs=configs,
                    ways_out=tuple(end.ways_out[k] for k in kept) if end.ways_out else ())
+
+
+def _stops(end: Endpoint, k: int, role: str) -> list:
+    """
+    Return configuration ``k`` of an end, then its retracted pose if it is inside a port.
+
+    Each is an ``Endpoint`` of that one configuration (``role``: the end's, start or goal);
+    the retracted pose of a ``<station>:inside`` end is labelled with the station's name.
+    """
+    elbow, q = end.configs[k]
+    here = Endpoint(end.label, ((elbow, q),), (end.way_out(k),) if end.ways_out else ())
+    way = end.way_out(k)
+    if way is None:
+        return [here]
+    label = end.label[:-len(INSIDE)] if end.label.endswith(INSIDE) else \
+        f'the retracted pose of the {role}'
+    return [here, Endpoint(label, ((elbow, way[-1]),))]
 
 
 def _check_deadline(deadline: Optional[float]) -> None:

@@ -231,7 +231,9 @@ def _summary(row: dict) -> str:
     load = '' if row['load'] == LOADED else f", {row['load']}"
     return (f"{row['from']} -> {row['to']}{load}: ok, "
             f"{summary.cycle_text(row['cycle_time'], row['initial_cycle_time'])}, "
-            f"{summary.branches_text(m['branches'])}\n"
+            f"{summary.branches_text(m['branches'])}"
+            + (f", stopping {m['stops']} times on its way (faster than the non-stop curve)"
+               if m.get('stops') else '') + '\n'
             f"  path {m['path_vertices']} vertices ({m['roadmap_path_vertices']} in the "
             f"roadmap), joint length {m['joint_path_length']:.2f} rad, wafer travel "
             f"{m['wafer_path_length']:.3f} m, {summary.clearance_text(m['min_clearance'])}\n"

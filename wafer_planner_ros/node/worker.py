@@ -4,27 +4,26 @@ The node's planning worker: planning, table-answering, watchdog and loading thre
 The planning thread plans one request at a time. Requests wait in a bounded backlog
 (``planning.max_queue``; beyond it the answer is ``BUSY``). A station pair that the station
 table holds never waits behind planning: the answering thread gives it at once (from a
-queue of its own, as long). Every
-queued request is answered by ``planning.timeout`` seconds after its receipt: the watchdog
-thread answers ``TIMEOUT`` at that instant for one not answered yet (waiting or still being
-planned), and a plan finished later is dropped, never sent. The loading thread loads the
-roadmap, waits for the compiled kernels (``startup.kernels_ready``: loaded since the
-process started, built ahead of time or from numba's cache, or compiled when missing) and
-loads the cached station
-table, and only then does the roadmap serve: the node is ready when it can answer, and
-until then every request is answered ``ROADMAP_NOT_READY`` at once, saying why. What the
-cached station tables lack is planned next, group by group, each handed to the service as
-it is planned (``serving.table_groups``: the station pairs, then the empty moves and the
-moves through the ports), and so are the pairs whose cached entries failed verification
-(``busy_with: station_table``), pairs the tables do not hold yet being planned within the
-budget meanwhile. A rebuild does the same while the previous roadmap serves,
-and keeps it serving when it fails (``rebuild_failed`` in the status says why). Each
-request is planned on the roadmap in force when it was received, the one a recording pairs
-it with, and answered as ``service.planning`` says. The worker never publishes: it
-hands every message, already serialised, to ``send``, which the node publishes from its
-executor. Every request gets exactly one answer, whatever happens: a failure of the node
-itself is answered ``INTERNAL`` with the reason. On stop the threads are left as they are
-(daemons): the node never waits for a plan or a table being planned.
+queue of its own, as long). Every queued request is answered by ``planning.timeout``
+seconds after its receipt: the watchdog thread answers ``TIMEOUT`` at that instant for one
+not answered yet (waiting or still being planned), and a plan finished later is dropped,
+never sent. The loading thread loads the roadmap, waits for the compiled kernels
+(``startup.kernels_ready``: loaded since the process started, built ahead of time or from
+numba's cache, or compiled when missing) and loads the cached station table, and only then
+does the roadmap serve: the node is ready when it can answer, and until then every request
+is answered ``ROADMAP_NOT_READY`` at once, saying why. What the cached station tables lack
+is planned next, group by group, each handed to the service as it is planned
+(``serving.table_groups``: the station pairs, then the empty moves, then the moves through
+the ports stopping at the port mouths, then those in full), and so are the pairs whose
+cached entries failed verification (``busy_with: station_table``), pairs the tables do not
+hold yet being planned within the budget meanwhile. A rebuild does the same while the
+previous roadmap serves, and keeps it serving when it fails (``rebuild_failed`` in the
+status says why). Each request is planned on the roadmap in force when it was received, the
+one a recording pairs it with, and answered as ``service.planning`` says. The worker never
+publishes: it hands every message, already serialised, to ``send``, which the node
+publishes from its executor. Every request gets exactly one answer, whatever happens: a
+failure of the node itself is answered ``INTERNAL`` with the reason. On stop the threads
+are left as they are (daemons): the node never waits for a plan or a table being planned.
 """
 
 from collections import deque

@@ -4,7 +4,8 @@ The cycle a fab buys: a single-blade swap between a loadport and a loadlock.
 Per wafer the blade makes two moves, port to port: ``<loadport>:inside`` ->
 ``<loadlock>:inside`` loaded (the wafer from its FOUP into the loadlock), then
 ``<loadlock>:inside`` -> ``<loadport>:inside`` empty (back for the next wafer). Each is one
-non-stop move (``Planner.plan``); the way back is planned on the elbow branches the way out
+move (``Planner.plan``): non-stop, unless stopping at the port mouths is faster (its
+``stops``); the way back is planned on the elbow branches the way out
 ended and started on, so that the cycle repeats. When the way out backwards is faster than
 the way back as planned and passes the empty set's verification, it is the way back
 (``Planner.faster``; the optimiser is local, and the empty set allows all the loaded one
@@ -52,11 +53,12 @@ class Move:
         return None if self.result is None else self.result.cycle_time
 
     def row(self) -> dict:
-        """Return the move as JSON data."""
+        """Return the move as JSON data (``stops``: where it stops on its way, ``Planner``)."""
         return {'from': self.start, 'to': self.goal, 'load': self.load,
                 'branches': list(self.result.branches if self.result else self.branches),
                 'cycle_time': self.cycle_time, 'error': self.error,
-                'adopted': bool(self.result and self.result.metrics.get('adopted'))}
+                'adopted': bool(self.result and self.result.metrics.get('adopted')),
+                'stops': self.result.metrics.get('stops', 0) if self.result else None}
 
 
 @dataclass(frozen=True, eq=False)

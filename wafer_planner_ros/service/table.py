@@ -29,6 +29,12 @@ be (``_described``). An entry that fails is left out and listed in
 plans those pairs again (``load_or_build_table`` does, and stores the table). Files are
 written to a temporary name and renamed, so a crash never leaves half a file.
 
+The port pairs' non-stop curves take minutes each to optimise. ``build_table`` with
+``stopping`` plans them first as they stop at the port mouths (``Planner.stop_and_go``,
+seconds each): those entries are ``provisional`` (a flag in their metrics), answered from
+like any other, and ``lacking`` to a build without ``stopping``, which plans them in full
+(``Planner.plan``: non-stop, unless stopping is faster) and replaces them.
+
 A re-taught station re-plans only its own pairs: a file also stores the SHA-256 of what its
 plans depend on besides the stations (the cell without its stations and name, the planner's
 settings, the package version: ``basis``) and of each station as written. When no table
@@ -189,7 +195,7 @@ def table_path(cache_dir, key: str) -> Path:
 def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], None]] = None,
                 loaded: Optional[StationTable] = None,
                 pairs: Optional[Sequence[Tuple[str, str]]] = None,
-                donor: Optional[StationTable] = None) -> StationTable:
+                donor: Optional[StationTable] = None, stopping: bool = False) -> StationTable:
     """
     Plan the ``pairs`` of ``table_pairs`` (default: every station pair); return the table.
 
@@ -204,6 +210,11 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     the table of another limit set, ``donor`` (the loaded moves' for the empty ones), its
     curve of a pair is taken instead when it is faster than the one planned and passes
     this planner's verification (``Planner.faster``).
+
+    ``stopping``: plan each pair through the ports as it stops at the port mouths
+    (``Planner.stop_and_go``: seconds, where the non-stop optimisation takes minutes),
+    stored ``provisional``: answered from at once, and planned in full by a build without
+    ``stopping`` (``lacking``). A pair whose chain cannot be planned is left for that build.
     """
     begun = time.perf_counter()
     entries = dict(loaded.entries) if loaded is not None else {}
@@ -213,21 +224,26 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     unknown = [pair for pair in pairs or () if pair not in known]
     if unknown:
         raise ValueError(f'{"->".join(unknown[0])} is not a pair a station table holds')
-    pairs = [pair for pair in (station_pairs(planner.cell) if pairs is None else pairs)
-             if pair not in entries and pair not in failures]
+    pairs = _lacking(entries, failures,
+                     station_pairs(planner.cell) if pairs is None else pairs, stopping)
     for done, (start, goal) in enumerate(pairs, 1):
         pair = (start, goal)
         try:
             back = entries.get((goal, start))
-            if back is None:
-                result = planner.plan(start, goal)
+            if back is None or (provisional(back) and not stopping):
+                result = planner.stop_and_go(start, goal) if stopping else \
+                    planner.plan(start, goal)
                 if donor is not None and pair in donor.entries:
                     result = planner.faster(result, donor.answer(planner, start, goal))
-                entries[pair], verified[pair] = _entry(result), result.verification
+                entries[pair], verified[pair] = _entry(result, stopping), result.verification
             else:
                 entries[pair], verified[pair] = _reversed(planner, pair, back)
         except PlanningError as exc:
-            failures[pair] = f'{exc.code.value}: {exc.message}'
+            if stopping:
+                logger.warning('station table: %s -> %s does not stop at the port mouths: %s',
+                               start, goal, exc)
+            else:
+                failures[pair] = f'{exc.code.value}: {exc.message}'
         if progress is not None:
             progress(done, len(pairs), f'{start}->{goal}')
     return StationTable(table_key(planner), entries, verified, failures,
@@ -237,11 +253,27 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
                         basis=table_basis(planner), stations=station_digests(planner.cell))
 
 
-def lacking(table: Optional[StationTable], pairs: Sequence[Tuple[str, str]]) -> list:
-    """Return the ``pairs`` a table (None: none) neither holds nor records as not plannable."""
+def lacking(table: Optional[StationTable], pairs: Sequence[Tuple[str, str]],
+            stopping: bool = False) -> list:
+    """
+    Return the ``pairs`` a table (None: none) neither holds nor records as not plannable.
+
+    A pair held by a ``provisional`` entry is lacking too, unless ``stopping`` (what a
+    ``build_table`` with ``stopping`` plans).
+    """
     if table is None:
         return list(pairs)
-    return [pair for pair in pairs if pair not in table.entries and pair not in table.failures]
+    return _lacking(table.entries, table.failures, pairs, stopping)
+
+
+def _lacking(entries: dict, failures: dict, pairs, stopping: bool) -> list:
+    return [pair for pair in pairs if pair not in failures and (
+        pair not in entries or not stopping and provisional(entries[pair]))]
+
+
+def provisional(entry: dict) -> bool:
+    """Return whether an entry is a move that stops at the port mouths, planned in full later."""
+    return entry['metrics'].get('provisional') is True
 
 
 def save_table(table: StationTable, cache_dir) -> Path:
@@ -389,18 +421,19 @@ def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
                           warn: Callable[[str], None] = logger.warning,
                           loaded: Optional[StationTable] = None,
                           pairs: Optional[Sequence[Tuple[str, str]]] = None,
-                          donor: Optional[StationTable] = None) -> StationTable:
+                          donor: Optional[StationTable] = None,
+                          stopping: bool = False) -> StationTable:
     """
     Build the table of ``pairs`` and, with a cache directory, store it (``warn`` if not).
 
     Given a table ``loaded`` from the cache, only its rejected pairs and the ``pairs`` it
     lacks are planned (see ``build_table``); without one, an earlier table's entries for
     unchanged stations are inherited (``inherited_table``) and only the other pairs planned.
-    ``donor``: see ``build_table``.
+    ``donor``, ``stopping``: see ``build_table``.
     """
     if loaded is None and cache_dir is not None:
         loaded = inherited_table(planner, cache_dir)
-    table = build_table(planner, progress, loaded, pairs, donor)
+    table = build_table(planner, progress, loaded, pairs, donor, stopping)
     if cache_dir is not None:
         try:
             save_table(table, cache_dir)
@@ -409,9 +442,14 @@ def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
     return table
 
 
-def _entry(result: PlanResult) -> dict:
-    """Return what the table keeps of a plan (plain data; an answer's ``source`` is not)."""
+def _entry(result: PlanResult, stopping: bool = False) -> dict:
+    """
+    Return what the table keeps of a plan (plain data; an answer's ``source`` is not).
+
+    ``stopping``: the plan is ``Planner.stop_and_go``'s, ``provisional`` until planned in full.
+    """
     metrics = {name: value for name, value in result.metrics.items() if name != 'source'}
+    metrics['provisional'] = stopping
     return _stored(result.branches, result.trajectory, result.initial_cycle_time,
                    result.roadmap_path, result.path, metrics, result.warnings,
                    result.timings_ms['total'])

@@ -8,6 +8,7 @@ and y (and |a|) at constraint samples (Eq. 9). ``Timing`` is what the optimiser 
 """
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -218,15 +219,16 @@ def initial_intervals(problem: TimingProblem) -> np.ndarray:
     return np.full(problem.spans, max(total / problem.spans, problem.min_interval))
 
 
-def scaled_start(problem: TimingProblem) -> tuple:
+def scaled_start(problem: TimingProblem, initial: Optional[np.ndarray] = None) -> tuple:
     """
     Return the paper's feasible start point (Eq. 12): (intervals, λ).
 
     λ of Eq. 12, then slowed further where the curve still exceeds a limit at the
     verification's times (``TimingProblem.meet_limits``): the start meets every limit
-    exactly as verification checks it.
+    exactly as verification checks it. ``initial``: the intervals scaled, in place of the
+    paper's uniform ones (``initial_intervals``).
     """
-    uniform = initial_intervals(problem)
+    uniform = initial_intervals(problem) if initial is None else np.asarray(initial, float)
     scale = problem.scale_factor(uniform)
     start, slower = problem.meet_limits(scale * uniform)
     return start, scale * slower
