@@ -12,10 +12,9 @@ def test_the_pose_where_two_legs_meet_stands_three_times():
     a = np.array([[0, 0, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [2, 0, 0]], float)
     b = np.array([[2, 0, 0], [2, 0, 0], [2, 0, 0], [2, 0, 0], [3, 1, 0], [4, 1, 0],
                   [4, 1, 0]], float)
-    points, owners = joined_points([a, b])
+    points = joined_points([a, b])
     assert points.tolist() == [[0, 0, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [2, 0, 0],
                                [2, 0, 0], [3, 1, 0], [4, 1, 0], [4, 1, 0]]
-    assert owners.tolist() == [0, 0, 0, 0, 0, 0, 1, 1, 1]  # the stop ends the first leg
 
 
 def test_legs_that_do_not_meet_are_refused():
@@ -42,5 +41,5 @@ def test_the_joined_curve_stops_where_the_legs_meet_and_meets_every_limit(
     q, qd, qdd = curve.evaluate_orders(curve.knots[m + DEGREE])
     assert np.allclose(q[0], there.goal_q, atol=1e-12)
     assert np.abs(qd).max() < 1e-9 and np.abs(qdd).max() < 1e-6
-    # About as long as the two legs one after the other (its timing is optimised anew).
-    assert curve.duration == pytest.approx(there.cycle_time + back.cycle_time, rel=0.05)
+    # No longer than the two legs one after the other: its timing starts from theirs.
+    assert curve.duration <= 1.001 * (there.cycle_time + back.cycle_time)

@@ -9,9 +9,9 @@ standing three times in a row (``joined_points``), so that the curve passes it a
 zero velocity and zero acceleration there, as the convex hull of its derivatives' control
 points shows — and keeps to the convex hull of its own legs' control points everywhere
 else. Its span durations are then optimised as the paper's timing does (``timing.optimise``:
-the control points fixed, every limit met), so that it takes about as long as its legs
-together. Like any curve, it is verified (and proven collision-free, within every port's
-tolerances) before it is returned.
+the control points fixed, every limit met) from the legs' own durations, so that it takes
+no longer than its legs together (``stopping_curve``). Like any curve, it is verified (and
+proven collision-free, within every port's tolerances) before it is returned.
 """
 
 import numpy as np
@@ -22,19 +22,17 @@ from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProb
 from wafer_planner_ros.trajectory.tuning import TimingSettings
 
 
-def joined_points(legs) -> tuple:
+def joined_points(legs) -> np.ndarray:
     """
     Return the control points of curves joined end to start, each pose they meet at rest.
 
     ``legs``: control point arrays (n_k, 3), each starting where the one before ends.
     Where two meet, their common pose stands exactly three times (the fewest that stop a
-    cubic there with no acceleration): each leg's own repeats of it are replaced. Returns
-    (points (N, 3), the leg each point comes from (N,): a stop's three copies belong to the
-    leg that ends there). Raises ValueError when a leg does not start where the one before
-    ends.
+    cubic there with no acceleration): each leg's own repeats of it are replaced. Raises
+    ValueError when a leg does not start where the one before ends.
     """
     legs = [np.asarray(leg, float) for leg in legs]
-    parts, owners = [], []
+    parts = []
     for k, leg in enumerate(legs):
         if k and not np.array_equal(leg[0], legs[k - 1][-1]):
             raise ValueError(f'leg {k} starts at {leg[0].tolist()}, not where leg {k - 1} '
@@ -44,31 +42,52 @@ def joined_points(legs) -> tuple:
         parts.append(leg[first:last])
         if k < len(legs) - 1:
             parts.append(np.repeat(leg[-1:], DEGREE, axis=0))
-        owners.append(np.full(sum(map(len, parts)) - sum(map(len, owners)), k))
-    return np.concatenate(parts), np.concatenate(owners)
+    return np.concatenate(parts)
 
 
 def stopping_curve(legs, robot, settings: TimingSettings = TimingSettings()) -> CubicBSpline:
     """
     Return the legs' curves (each at rest at both ends) joined into one and timed.
 
-    ``legs``: ``CubicBSpline`` (or any curve with ``control_points`` and ``duration``), in
-    order. The durations are the paper's timing optimisation of the joined control points,
-    started from each leg's own duration spread evenly over its spans and λ-scaled to meet
-    every limit (``scaled_start``: the paper's uniform start, spread over legs of very
-    different lengths, led the optimiser to a curve 1.77 times as long as its legs once);
-    the curve meets every limit of ``robot`` (its limit set's), as that optimisation's
-    answers do.
+    ``legs``: ``CubicBSpline``, in order. The durations are the paper's timing optimisation
+    of the joined control points, from two starts, the faster answer kept: the legs' own
+    span durations one after the other (``own_intervals``), and the paper's uniform start,
+    each λ-scaled to meet every limit (``scaled_start``). The first differs from the legs
+    only next to the stops, so the curve takes about as long as its legs or less (the
+    optimiser keeps its start when it finds nothing faster); the second found a faster
+    curve on some chains. The curve meets every limit of ``robot`` (its limit set's), as
+    that optimisation's answers do.
     """
-    points, owners = joined_points([leg.control_points for leg in legs])
+    points = joined_points([leg.control_points for leg in legs])
     problem = TimingProblem(points, robot, settings)
-    # Span s lies between points s + 1 and s + 2: the leg of point s + 1 owns it.
-    span_owner = owners[1:1 + problem.spans]
-    spans = np.bincount(span_owner, minlength=len(legs))
-    durations = np.array([leg.duration for leg in legs])
-    initial = np.maximum(durations[span_owner] / spans[span_owner], problem.min_interval)
-    timing = optimise(problem, scaled_start(problem, initial))
-    return CubicBSpline.from_intervals(problem.points, timing.intervals)
+    best = None
+    for initial in (own_intervals(legs, problem.spans), None):
+        intervals = optimise(problem, scaled_start(problem, initial), quiet=True).intervals
+        if best is None or intervals.sum() < best.sum():
+            best = intervals
+    return CubicBSpline.from_intervals(problem.points, best)
+
+
+def own_intervals(legs, spans: int):
+    """
+    Return the legs' span durations one after the other, as the joined curve's ``spans``.
+
+    A leg at rest on three equal control points at a stop gives the joined curve as many
+    spans there as it has; one at rest on two (no stop of its acceleration) gives it one
+    more, which gets the leg's shortest span next to it; one dwelling on more than three
+    loses its spans of rest (those whose four control points are equal). None if the count
+    still differs.
+    """
+    pieces = []
+    for k, leg in enumerate(legs):
+        points, own = leg.control_points, leg.intervals
+        head = DEGREE - (_repeated(points) if k else DEGREE)
+        tail = DEGREE - (_repeated(points[::-1]) if k < len(legs) - 1 else DEGREE)
+        short = own[[0, -1]].min()
+        own = own[max(-head, 0):len(own) - max(-tail, 0)]
+        pieces += [np.full(max(head, 0), short), own, np.full(max(tail, 0), short)]
+    joined = np.concatenate(pieces)
+    return joined if len(joined) == spans else None
 
 
 def _repeated(points: np.ndarray) -> int:

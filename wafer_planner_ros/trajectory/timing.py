@@ -65,7 +65,7 @@ logger = logging.getLogger(__name__)
 
 
 def optimise(problem: TimingProblem, start=None, give_up_above=None,
-             deadline: Optional[float] = None) -> Optional[Timing]:
+             deadline: Optional[float] = None, quiet: bool = False) -> Optional[Timing]:
     """
     Return the optimised timing of the problem (see the module's description).
 
@@ -74,7 +74,8 @@ def optimise(problem: TimingProblem, start=None, give_up_above=None,
     optimum, whose samples are a subset of the final ones, exceeds it by more than
     ``give_up_margin`` (the planner uses it to drop an elbow-branch combination that
     cannot win). ``deadline``: a ``time.monotonic()`` instant at which the solver stops and
-    the fastest feasible timing so far is returned.
+    the fastest feasible timing so far is returned. ``quiet``: returning the start is no
+    news (a start already close to the optimum), logged at debug level, not as a warning.
     """
     tuning = problem.settings
     start, scale = start or scaled_start(problem)
@@ -116,7 +117,8 @@ def optimise(problem: TimingProblem, start=None, give_up_above=None,
     if best is start:
         message = f'solver failed: {result.message}' if not result.converged else \
             'no answer of the solver, scaled to meet every limit, beat the start'
-        logger.warning('time optimisation fell back to the λ-scaled timing: %s', message)
+        logger.log(logging.DEBUG if quiet else logging.WARNING,
+                   'time optimisation fell back to the λ-scaled timing: %s', message)
         return Timing(start, start, scale, False, iterations, rounds, len(span), message)
     return Timing(best, start, scale, True, iterations, rounds, len(span),
                   f'stopped after {rounds} rounds, rescaled by {rescale:.4f}')
