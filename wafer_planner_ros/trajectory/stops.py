@@ -60,8 +60,9 @@ def stopping_curve(legs, robot, settings: TimingSettings = TimingSettings()) -> 
     """
     points = joined_points([leg.control_points for leg in legs])
     problem = TimingProblem(points, robot, settings)
+    own = own_intervals(legs, problem.spans)
     best = None
-    for initial in (own_intervals(legs, problem.spans), None):
+    for initial in ([own] if own is not None else []) + [None]:
         intervals = optimise(problem, scaled_start(problem, initial), quiet=True).intervals
         if best is None or intervals.sum() < best.sum():
             best = intervals
