@@ -18,6 +18,9 @@ from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.node.planner_node import LATCHED, RELIABLE, WaferPlannerNode
 
+RESEND = 5.0
+"""Seconds a service call waits for its answer before it is sent again."""
+
 
 def isolate_dds(tmp_path) -> None:
     """Keep DDS traffic on loopback, in a domain of this test run, logs in a temp dir."""
@@ -67,16 +70,33 @@ class Peer:
                                       inbox.append, LATCHED)
         return inbox
 
-    def call(self, name: str, request=None):
-        """Call a service of the node and return the response."""
+    def call(self, name: str, request=None, resend: bool = False):
+        """
+        Call a service of the node and return the response; fail after 120 s unanswered.
+
+        ``resend``: for a call that changes nothing (``get_status``). DDS drops a response
+        when the node has not yet discovered this client's reader ("failed to send response
+        (timeout)" on its side), which can happen to the first calls while the two discover
+        each other: such a call unanswered for 5 s is sent again, as ``wafer-plan-client``
+        does.
+        """
         client = self.clients[name]
-        future = client.call_async(request or client.srv_type.Request())
-        wait_for(future.done, 120.0)
-        return future.result()
+        request = request or client.srv_type.Request()
+        deadline = time.monotonic() + 120.0
+        while True:
+            future = client.call_async(request)
+            wait = deadline - time.monotonic()
+            try:
+                wait_for(future.done, min(RESEND, wait) if resend else wait)
+                return future.result()
+            except AssertionError:
+                client.remove_pending_request(future)
+                if time.monotonic() >= deadline:
+                    raise AssertionError(f'~/{name}: no answer in 120 s') from None
 
     def status(self) -> dict:
         """Return ``~/get_status`` as a dict."""
-        return json.loads(self.call('get_status').message)
+        return json.loads(self.call('get_status', resend=True).message)
 
     def send_stations(self, request: dict) -> None:
         """Publish a station request (JSON)."""

@@ -46,6 +46,10 @@ def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals, *paramet
         wait_for(lambda: len(peer.results) >= len(requests), 300)
         node.send_signal(stop)
         output, _ = node.communicate(timeout=60)
+    except AssertionError as exc:  # say what the node was doing
+        node.kill()
+        raise AssertionError(f'{exc}; the node printed:\n{node.communicate()[0][-4000:]}') \
+            from None
     finally:
         if node.poll() is None:
             node.kill()
