@@ -17,7 +17,9 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
-    extras_require={'test': ['pytest', 'hypothesis', 'rosbags']},
+    extras_require={'test': ['pytest', 'hypothesis', 'rosbags'],
+                    # wafer-study: --ray runs on a Ray cluster, --search is an Optuna search
+                    'ray': ['ray[default]'], 'search': ['optuna']},
     zip_safe=True,
     maintainer='wafer_planner_ros developers',
     maintainer_email='wafer-planner@example.com',
@@ -32,6 +34,7 @@ setup(
             'wafer-recover = wafer_planner_ros.cli.recover:entry_point',
             'wafer-replay = wafer_planner_ros.cli.replay:entry_point',
             'wafer-review = wafer_planner_ros.cli.review:entry_point',
+            'wafer-study = wafer_planner_ros.cli.study:entry_point',
             'wafer_planner_node = wafer_planner_ros.node.main:entry_point',
         ],
     },

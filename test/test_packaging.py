@@ -24,7 +24,7 @@ PROVIDES = {
     'daqp': ['daqp'], 'threadpoolctl': ['threadpoolctl'], 'shapely': ['shapely'],
     'import-linter': ['importlinter'], 'foxglove-sdk': ['foxglove'], 'websockets': ['websockets'],
     'python-fcl': ['fcl'], 'mcap': ['mcap'], 'rosbags': ['rosbags'],
-    'tf2_ros': [],
+    'tf2_ros': [], 'ray': ['ray'], 'optuna': ['optuna'],
 }
 TEST_ONLY = {'sensor_msgs'}  # visualization_msgs brings it; only the tests import it
 
