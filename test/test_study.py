@@ -322,3 +322,9 @@ def test_the_same_study_on_a_local_ray_cluster_gives_the_same_rows(uninterrupted
                 except subprocess.TimeoutExpired:
                     process.kill()
                     process.communicate()
+
+
+def test_a_ray_address_where_nothing_answers_is_refused_at_once(tmp_path):
+    pytest.importorskip('ray')
+    done = study_cli(small_study(tmp_path), '--out', tmp_path / 'out', '--ray', '127.0.0.1:1')
+    assert done.returncode == 2 and 'no Ray cluster answers at 127.0.0.1:1' in done.stderr

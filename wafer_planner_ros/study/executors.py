@@ -11,6 +11,7 @@ import multiprocessing
 from multiprocessing.connection import wait
 import os
 import signal
+import socket
 from typing import Callable, Dict, Optional, Tuple
 
 from wafer_planner_ros.study.evaluate import task as evaluate_task
@@ -104,6 +105,20 @@ class LocalExecutor:
         self._idle, self._busy = [], {}
 
 
+def _check_reachable(address: str) -> None:
+    """Raise RuntimeError unless something listens at ``host:port`` (Ray would retry forever)."""
+    if address == 'auto' or '://' in address:
+        return
+    host, _, port = address.rpartition(':')
+    try:
+        socket.create_connection((host or '127.0.0.1', int(port)), timeout=5).close()
+    except ValueError:
+        raise RuntimeError(f'{address!r} is not host:port (or auto)') from None
+    except OSError as exc:
+        raise RuntimeError(f'no Ray cluster answers at {address} '
+                           f'({exc.strerror or type(exc).__name__})') from None
+
+
 class RayExecutor:
     """The tasks on a Ray cluster: one CPU each, as many at a time as the cluster has CPUs."""
 
@@ -115,6 +130,7 @@ class RayExecutor:
             raise RuntimeError("--ray needs Ray: pip install 'ray[default]' (or this "
                                "package's extra: pip install '.[ray]')") from None
         self._ray = ray
+        _check_reachable(address)
         ray.init(address=address, logging_level='WARNING', log_to_driver=False,
                  configure_logging=False)
         self.workers = max(int(ray.cluster_resources().get('CPU', 1)), 1)
