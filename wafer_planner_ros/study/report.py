@@ -36,7 +36,11 @@ def parameter_value(about: dict, row: dict, name: str) -> float:
 
 
 def best_table(about: dict, rows: Sequence[dict], count: int = 10) -> str:
-    """Return the summary and the ``count`` fastest variants, against the base cell."""
+    """
+    Return the summary and the ``count`` fastest variants, against the base cell.
+
+    Then the first ``count`` invalid or failed variants with their reasons.
+    """
     statuses = [r.get('status') for r in rows]
     lines = [f"study {about['name']}: {len(rows)} variants: "
              + ', '.join(f'{statuses.count(s)} {s}' for s in (PLANNED, INCOMPLETE, INVALID,
@@ -58,11 +62,14 @@ def best_table(about: dict, rows: Sequence[dict], count: int = 10) -> str:
         lines.append(f"{rank:>3} {row['variant']:<17}{row['swap_cycle']:>8.3f}"
                      f"{row['wafers_per_hour']:>9.0f}{ratio:>8}{row['footprint']:>6.2f}"
                      f"{row['min_clearance'] * 1e3:>9.1f}  {values}")
-    for row in rows:
-        if row.get('status') in (INVALID, FAILED):
-            lines.append(f"{row['status']}: {row['variant']} "
-                         f"({', '.join(f'{k}={_short(v)}' for k, v in row['parameters'].items())}"
-                         f"): {row.get('reason', '')}")
+    refused = [row for row in rows if row.get('status') in (INVALID, FAILED)]
+    for row in refused[:count]:
+        lines.append(f"{row['status']}: {row['variant']} "
+                     f"({', '.join(f'{k}={_short(v)}' for k, v in row['parameters'].items())}"
+                     f"): {row.get('reason', '')}")
+    if len(refused) > count:
+        lines.append(f'... and {len(refused) - count} more invalid or failed (results.jsonl '
+                     'has every reason)')
     return '\n'.join(lines)
 
 
