@@ -9,6 +9,7 @@ A study's report: its best variants as a table, and three figures.
   variant's motions are a function of its cell and the study's settings).
 """
 
+import functools
 import math
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
@@ -30,9 +31,15 @@ def parameter_value(about: dict, row: dict, name: str) -> float:
     """Return a row's value of ``name`` (the base cell's when the row leaves it out)."""
     if name in row.get('parameters', {}):
         return float(row['parameters'][name])
-    from wafer_planner_ros.cell.document import read_cell_yaml
     from wafer_planner_ros.study import parameters
-    return parameters.value(read_cell_yaml(about['base_text'], about['base_file']), name)
+    return parameters.value(_base_cell(about['base_text'], about['base_file']), name)
+
+
+@functools.lru_cache(maxsize=4)
+def _base_cell(text: str, file: str):
+    """Return the study's base cell, read once per report (not once per row)."""
+    from wafer_planner_ros.cell.document import read_cell_yaml
+    return read_cell_yaml(text, file)
 
 
 def best_table(about: dict, rows: Sequence[dict], count: int = 10) -> str:

@@ -16,7 +16,7 @@ import json
 import os
 from pathlib import Path
 import tempfile
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 RESULTS = 'results.jsonl'
 STUDY = 'study.json'
@@ -122,23 +122,12 @@ class Results:
 
     def _read(self, say: Callable[[str], None]) -> None:
         path = self.directory / RESULTS
-        if not path.exists():
-            return
-        with open(path, 'rb') as stream:
-            data = stream.read()
-        good = 0
-        for number, line in enumerate(data.split(b'\n')[:-1], 1):
-            try:
-                row = json.loads(line)
-                variant = row['variant']
-            except (ValueError, TypeError, KeyError):
-                raise ResultsError(f'{path}, line {number}: not a row of results; the file '
-                                   'is left as it is') from None
-            good += len(line) + 1
-            if variant not in self.rows:
-                self.order.append(variant)
-            self.rows[variant] = row
-        if good < len(data):  # the last line, cut off by a kill
+        rows, good, size = _read_lines(path, 'the file is left as it is')
+        for row in rows:
+            if row['variant'] not in self.rows:
+                self.order.append(row['variant'])
+            self.rows[row['variant']] = row
+        if good < size:  # the last line, cut off by a kill
             with open(path, 'r+b') as stream:
                 stream.truncate(good)
             say(f'{path}: its last line was cut off (the study was stopped while writing '
@@ -163,19 +152,34 @@ def read_about(directory) -> dict:
 
 def read_rows(directory) -> List[dict]:
     """Return the rows of ``directory`` in file order (a cut-off last line left out)."""
-    path = Path(directory).expanduser() / RESULTS
-    rows: List[dict] = []
+    return _read_lines(Path(directory).expanduser() / RESULTS)[0]
+
+
+def _read_lines(path: Path, after: str = '') -> Tuple[List[dict], int, int]:
+    """
+    Return the whole lines of ``path`` as rows, the bytes they span and the file's size.
+
+    A last line without its newline (a write cut off by a kill) is not a row. A whole line
+    that is not a row with a ``variant`` raises :class:`ResultsError` naming its number.
+    """
     try:
         with open(path, 'rb') as stream:
-            lines = stream.read().split(b'\n')[:-1]
+            data = stream.read()
     except FileNotFoundError:
-        return rows
-    for number, line in enumerate(lines, 1):
+        return [], 0, 0
+    rows: List[dict] = []
+    good = 0
+    for number, line in enumerate(data.split(b'\n')[:-1], 1):
         try:
-            rows.append(json.loads(line))
+            row = json.loads(line)
         except ValueError:
-            raise ResultsError(f'{path}, line {number}: not a row of results') from None
-    return rows
+            row = None
+        if not isinstance(row, dict) or 'variant' not in row:
+            raise ResultsError(f'{path}, line {number}: not a row of results'
+                               + (f'; {after}' if after else ''))
+        rows.append(row)
+        good += len(line) + 1
+    return rows, good, len(data)
 
 
 def without_cost(row: Optional[dict]) -> Optional[dict]:

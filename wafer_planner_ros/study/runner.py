@@ -63,16 +63,20 @@ def run_variants(study: Study, variants: Iterable[Variant], executor, results: R
         progress(f'{done}/{total} variants ({planned} planned in full), {running} running'
                  f'{left}')
 
-    show()
-    while queue or done < total:
+    def fill() -> None:
         while queue and executor.free:
             variant = queue.pop()
             executor.submit(variant.key, payload(study, variant))
+
+    fill()
+    show()
+    while done < total:
         key, row, reason = executor.next_done()
         if row is None:
             reasons[key].append(reason)
             if len(reasons[key]) < ATTEMPTS:
                 queue.append(by_key[key])  # next, on whichever worker is free
+                fill()
                 continue
             row = failed_row(by_key[key], reasons[key])
         results.add({**row, **(tags or {}).get(key, {})})
@@ -80,6 +84,7 @@ def run_variants(study: Study, variants: Iterable[Variant], executor, results: R
         planned += row.get('status') == PLANNED
         if on_row is not None:
             on_row(row)
+        fill()  # before the count, so that "running" counts the workers busy again
         show()
     return total
 
