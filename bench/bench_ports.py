@@ -15,11 +15,14 @@ roadmap seed 0 (the node's default), planned by the whole-curve optimiser as a
 
 Each answer is verified by the planner (every limit of its set and the port tolerances
 every millisecond, the collision proof). Reported per pair: the cycle times, each non-stop
-move's planning time (s), the way out against its three stop-and-go moves, the cycle
-against the stop-and-go cycle, and on the default cell the way out against the
-optimal-control figure of the same move (direct collocation with IPOPT, every joint and
-wafer limit including jerk, the port model of the cell file). Writes
-``results/ports-<cell name>.json``.
+move's planning time (s), the way out against its own stop-and-go chain
+(``Planner.stop_and_go``: the same move stopping at both port mouths) and against its three
+stop-and-go moves, its time along the channels and on the transfer (shares of its cycle
+time), the cycle against the stop-and-go cycle, and on the default cell the way out
+against the optimal-control figure of the same move (direct collocation with IPOPT, every
+joint and wafer limit including jerk, the port model of the cell file: within its
+tolerance band). The results file written before, if any, is the comparison: each pair's
+way out and planning time then (``before_*``). Writes ``results/ports-<cell name>.json``.
 
 Run: ``python bench/bench_ports.py [CELL_FILE ...]`` (default: the three cells), or
 ``python bench/bench_ports.py CELL_FILE --pair LOADPORT LOADLOCK`` to plan one pair again and
@@ -81,6 +84,13 @@ def pair_row(planner, corridor, loadport, loadlock) -> dict:
     row['planning_s'] = [seconds[(m.start, m.goal, m.load, None if m.branches == (None, None)
                                   else m.branches)] for m in cycle.moves]
     row['non_stop'] = out.cycle_time
+    if out.result is not None:
+        own = planner.stop_and_go(out.start, out.goal, load=out.load).cycle_time
+        row['own_stop_and_go'], row['over_own_stop_and_go'] = own, out.cycle_time / own
+        row['in_port_share'] = out.result.metrics['in_port_time'] / out.cycle_time
+        row['transfer_share'] = out.result.metrics['transfer_time'] / out.cycle_time
+        row['mouth_speeds'] = [out.result.metrics['start_mouth_speed'],
+                               out.result.metrics['goal_mouth_speed']]
     row['corridor_curve'] = _timed(corridor, out.start, out.goal)[0]
     chain = cycle.stop_and_go_moves
     row['stop_and_go_out'] = sum(m.cycle_time for m in chain[:3]) if chain else None
@@ -115,11 +125,18 @@ def main(argv=None) -> int:
         # The default cell: the pairs with an optimal-control figure.
         pairs = list(OPTIMAL) if cell.name == DEFAULT_CELL else loadport_loadlock_pairs(cell)
         written = RESULTS / f'ports-{cell.name}.json'
+        before = {(r['loadport'], r['loadlock']): r for r in json.loads(
+            written.read_text())['pairs']} if written.exists() else {}
         rows = [] if only is None else json.loads(written.read_text())['pairs']
         for loadport, loadlock in pairs:
             if only is not None and (loadport, loadlock) != only:
                 continue
             row = pair_row(planner, corridor, loadport, loadlock)
+            then = before.get((loadport, loadlock), {})
+            for key in ('non_stop', 'cycle'):
+                row[f'before_{key}'] = then.get(f'before_{key}', then.get(key)) \
+                    if only is not None else then.get(key)
+            row['before_planning_s'] = (then.get('planning_s') or [None])[0]
             if only is None:
                 rows.append(row)
             else:
@@ -128,7 +145,9 @@ def main(argv=None) -> int:
             print(f"{cell.name} {loadport} <-> {loadlock}: non-stop out {row['non_stop']} s "
                   f"(x {row.get('over_optimal_control', float('nan')):.3f} of the limit, "
                   f"x {row.get('non_stop_over_stop_and_go', float('nan')):.3f} of "
-                  f"stop-and-go) in {row['planning_s'][0]:.1f} s; cycle {row['cycle']} s "
+                  f"stop-and-go, x {row.get('over_own_stop_and_go', float('nan')):.3f} of its "
+                  f"own) in {row['planning_s'][0]:.2f} s (before: {row['before_non_stop']} s "
+                  f"in {row['before_planning_s']} s); cycle {row['cycle']} s "
                   f"against stop-and-go {row['stop_and_go']} s "
                   f"(x {row.get('cycle_over_stop_and_go', float('nan')):.3f})"
                   + ''.join(f'; {e}' for e in errors), flush=True)
@@ -141,6 +160,7 @@ def main(argv=None) -> int:
             'cell': cell.name, 'pairs': rows,
             'median_over_optimal_control': median('over_optimal_control'),
             'median_non_stop_over_stop_and_go': median('non_stop_over_stop_and_go'),
+            'median_over_own_stop_and_go': median('over_own_stop_and_go'),
             'median_cycle_over_stop_and_go': median('cycle_over_stop_and_go'),
             'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows])),
             'machine': {'python': platform.python_version(), 'cpus': os.cpu_count()}}

@@ -2,6 +2,9 @@
 An independent check of a planned trajectory, sharing no code with the planner's own.
 
 The spline is evaluated by scipy's BSpline from the knots and control points as exported;
+a move through ports (kind ``through-ports``) by its parts: the transfer the same way, each
+way through a port from its profile's jerks integrated here and the inverse kinematics of
+the straight line solved here (law of cosines; derivatives from the Jacobian written here);
 the wafer acceleration comes from second differences of forward-kinematics positions and
 the jerk from first differences of the acceleration (weighted averages of the true values,
 so never above their peaks); collisions are checked
@@ -19,10 +22,9 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
     """Assert everything a user relies on; return the measured ratios."""
     robot = cell.robot
     limits = robot.limit_sets[plan['load']]  # loaded: the wafer limit too; empty: not
-    knots = np.array(plan['spline']['knots'])
-    points = np.array(plan['spline']['control_points'])
-    curve = BSpline(knots, points, 3)
-    duration = knots[-1]
+    curve = _curve(plan['spline'])
+    duration = curve.duration
+    points = curve.ends
     assert np.isclose(duration, plan['cycle_time'], rtol=0, atol=1e-12)
     t = np.linspace(0.0, duration, int(np.ceil(duration / STEP)) + 1)
     q, qd, qdd = curve(t), curve(t, 1), curve(t, 2)
@@ -96,6 +98,119 @@ def port_ratios(cell, q: np.ndarray) -> dict:
             lateral = max(lateral, np.abs(off[inside]).max() / port['lateral_tolerance'])
             turned = max(turned, np.abs(turn).max() / port['heading_tolerance'])
     return {'port_lateral': float(lateral), 'port_heading': float(turned)}
+
+
+def _curve(described: dict):
+    """Return the exported curve as a callable curve(t, order) with duration and ends."""
+    if described.get('kind', 'cubic-b-spline') == 'cubic-b-spline':
+        return _Spline(described)
+    assert described['kind'] == 'through-ports', described.get('kind')
+    return _PortMove(described)
+
+
+class _Spline:
+    def __init__(self, described):
+        knots = np.array(described['knots'])
+        points = np.array(described['control_points'])
+        self.spline, self.duration = BSpline(knots, points, 3), float(knots[-1])
+        self.ends = points[[0, -1]]
+
+    def __call__(self, t, order=0):
+        return self.spline(np.clip(t, 0.0, self.duration), order)
+
+
+class _Way:
+    """sigma(t) from the profile's jerks alone, and q(sigma) by the law of cosines."""
+
+    def __init__(self, described):
+        profile, channel = described['profile'], described['channel']
+        self.starts, self.jerks = np.array(profile['starts']), np.array(profile['jerks'])
+        state = np.zeros(3)
+        self.states = [state]
+        for tau, j in zip(np.diff(self.starts), self.jerks):
+            p, v, a = state
+            state = np.array([p + v * tau + a * tau ** 2 / 2 + j * tau ** 3 / 6,
+                              v + a * tau + j * tau ** 2 / 2, a + j * tau])
+            self.states.append(state)
+        self.states = np.array(self.states)
+        self.duration = float(self.starts[-1])
+        self.base, self.lengths = np.array(channel['base']), np.array(channel['link_lengths'])
+        self.inside, self.mouth = np.array(channel['inside']), np.array(channel['mouth'])
+        self.direction = np.array(channel['direction'])
+        self.length = float(channel['length'])
+        theta = np.cumsum(self.inside)
+        self.centre = self.base + np.array([self.lengths @ np.cos(theta),
+                                            self.lengths @ np.sin(theta)])
+        self.heading = float(np.sum(self.inside))
+        assert abs(self.states[-1, 0] - self.length) < 1e-9
+
+    def sigma(self, t):
+        t = np.clip(t, 0.0, self.duration)
+        k = np.clip(np.searchsorted(self.starts, t, side='right') - 1, 0, len(self.jerks) - 1)
+        tau, (p, v, a), j = t - self.starts[k], self.states[k].T, self.jerks[k]
+        return (p + v * tau + a * tau ** 2 / 2 + j * tau ** 3 / 6,
+                v + a * tau + j * tau ** 2 / 2, a + j * tau, j)
+
+    def q(self, s):
+        l1, l2, l3 = self.lengths
+        centre = self.centre + s[:, None] * self.direction
+        wrist = centre - l3 * np.array([np.cos(self.heading), np.sin(self.heading)])
+        d = wrist - self.base
+        q2 = np.sign(self.inside[1]) * np.arccos(
+            (np.sum(d * d, axis=1) - l1 ** 2 - l2 ** 2) / (2 * l1 * l2))
+        q1 = np.arctan2(d[:, 1], d[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+        q = np.stack([q1, q2, self.heading - q1 - q2], axis=1)
+        near = self.inside + (s / self.length)[:, None] * (self.mouth - self.inside)
+        q += 2 * np.pi * np.round((near - q) / (2 * np.pi))
+        q[s <= 0.0], q[s >= self.length] = self.inside, self.mouth
+        return q
+
+    def __call__(self, t, order):
+        s, s1, s2, _ = self.sigma(t)
+        q = self.q(s)
+        if order == 0:
+            return q
+        # The wafer centre moves along the direction at speed s1, accelerating by s2, and
+        # does not turn: J q' = d s1, sum q' = 0, and J q'' + (dJ/dt) q' = d s2.
+        theta = np.cumsum(q, axis=1)
+        c = np.cumsum((self.lengths * np.cos(theta))[:, ::-1], axis=1)[:, ::-1]
+        n = np.cumsum((self.lengths * np.sin(theta))[:, ::-1], axis=1)[:, ::-1]
+        full = np.stack([-n, c, np.ones_like(c)], axis=1)
+        right = np.concatenate([self.direction * s1[:, None], np.zeros((len(s), 1))], axis=1)
+        qd = np.linalg.solve(full, right[..., None])[..., 0]
+        if order == 1:
+            return qd
+        w = np.cumsum(qd, axis=1)
+        spin = self.lengths * w ** 2
+        bend = -np.stack([(spin * np.cos(theta)).sum(1), (spin * np.sin(theta)).sum(1)], axis=1)
+        right = np.concatenate([self.direction * s2[:, None] - bend, np.zeros((len(s), 1))],
+                               axis=1)
+        return np.linalg.solve(full, right[..., None])[..., 0]
+
+
+class _PortMove:
+    def __init__(self, described):
+        self.transfer = _Spline(described['transfer'])
+        self.out = None if described['out'] is None else _Way(described['out'])
+        self.into = None if described['into'] is None else _Way(described['into'])
+        self.first = 0.0 if self.out is None else self.out.duration
+        self.last = self.first + self.transfer.duration
+        self.duration = self.last + (0.0 if self.into is None else self.into.duration)
+        self.ends = np.array([self(np.zeros(1))[0], self(np.array([self.duration]))[0]])
+
+    def __call__(self, t, order=0):
+        t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
+        out = np.empty((len(t), 3))
+        first = (t <= self.first) if self.out is not None else np.zeros(len(t), bool)
+        last = (t >= self.last) & ~first if self.into is not None else np.zeros(len(t), bool)
+        middle = ~(first | last)
+        if first.any():
+            out[first] = self.out(t[first], order)
+        if middle.any():
+            out[middle] = self.transfer(t[middle] - self.first, order)
+        if last.any():
+            out[last] = self.into(self.duration - t[last], order) * (-1.0) ** order
+        return out
 
 
 def _wafer_centre(robot, q):

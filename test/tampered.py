@@ -16,7 +16,9 @@ curve. The edits, each to one entry's curve:
   (checking it would take seconds and hundreds of megabytes);
 - ``askew``: the wrist's fourth control point (the first that is free of the start at rest)
   turned by 0.05 rad: a motion that starts and ends as stored but, out of a port, turns the
-  blade beyond the port's heading tolerance;
+  blade beyond the port's heading tolerance; of a move through ports (``through-ports``)
+  the wrist turned by 0.05 rad at the end of its way out of the port and the start of its
+  transfer: its parts still join, but the way out is no longer the straight line;
 
 and, the curve left as it is, to what an answer reports besides it:
 
@@ -58,7 +60,14 @@ def _slowed(entry: dict) -> None:
 
 
 def _askew(entry: dict) -> None:
-    entry['trajectory']['control_points'][3][2] += 0.05
+    curve = entry['trajectory']
+    if curve.get('kind') != 'through-ports':
+        curve['control_points'][3][2] += 0.05
+        return
+    # The blade turned by 0.05 rad at the port's mouth, where the transfer starts: the way
+    # out still starts at the stored pose and meets the transfer, but no longer straight.
+    for q in (curve['out']['channel']['mouth'], *curve['transfer']['control_points'][:3]):
+        q[2] += 0.05
 
 
 def _initial(entry: dict) -> None:

@@ -110,10 +110,9 @@ def test_the_first_requests_after_a_fresh_start_are_answered_ok_and_sigterm_ends
             timeout=120).stdout)
         assert status['kernels_compiled'] == 0, status
         assert status['kernels_ahead'] > 0, status  # the set-up's build, loaded
-        # The station table is still being planned: its station pairs (seconds), the moves
-        # through the ports stopping at their mouths (about 2 minutes of one core, loaded
-        # and empty; more on a busy machine: a wait, not a time asserted), then those moves
-        # in full (minutes each). Stop the node in the midst of one of the last.
+        # The station table is still being planned: its station pairs, then the moves
+        # through the ports (a second or two each; more on a busy machine: a wait, not a
+        # time asserted). Stop the node in the midst of the latter.
         node.wait_for('station table (loaded): 1/', 120.0)
         node.wait_for('station table (loaded): planning 12 pairs, e.g. loadport1:inside', 600.0)
         time.sleep(1.0)

@@ -142,10 +142,9 @@ def test_the_tables_are_planned_group_by_group_each_pair_stored_and_published(
     whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
     stations, through = station_pairs(default_cell), port_pairs(default_cell)
     assert table_groups(whole, ports) == [
-        (LOADED, stations, False), (EMPTY, stations, False), (LOADED, through, True),
-        (EMPTY, through, True), (LOADED, through, False), (EMPTY, through, False)]
+        (LOADED, stations), (EMPTY, stations), (LOADED, through), (EMPTY, through)]
     settings = replace(ports, station_table_ports=False)
-    assert table_groups(whole, settings) == [(LOADED, stations, False)]
+    assert table_groups(whole, settings) == [(LOADED, stations)]
     # Half the table cached (a build stopped half-way): only the other half is planned.
     half = build_table(Planner(default_cell, default_roadmap), pairs=stations[:6])
     save_table(replace(half, key=table_key(whole)), tmp_path)

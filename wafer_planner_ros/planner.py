@@ -27,13 +27,16 @@ from wafer_planner_ros.cell.stations import INSIDE
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.geometry.contacts import colliding
 from wafer_planner_ros.geometry.ports import describe_deviation
+from wafer_planner_ros.moves.channel import Channel, channel_bounds
+from wafer_planner_ros.moves.through import compose, free_end, PortMove
+from wafer_planner_ros.moves.timing import profile
 from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
-from wafer_planner_ros.trajectory.corridor import build_corridor, simplify, through_ports
+from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import CurveMethod, Draft, KnotTiming, METHODS
 from wafer_planner_ros.trajectory.methods import Shaped
-from wafer_planner_ros.trajectory.stops import stopping_curve
+from wafer_planner_ros.trajectory.shape_problem import FreeEnd
 from wafer_planner_ros.trajectory.stopwatch import collecting, PARTS
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 from wafer_planner_ros.trajectory.verify import Verification, verify
@@ -52,6 +55,11 @@ MAX_QUOTED = 200
 LEGS_KEPT = 64
 """The stop-and-go legs a planner keeps (``Planner._leg``): every retract and extend of 16
 stations with ports on both elbow branches, with 32 transfers between them."""
+MAX_WAY_TIME = 30.0
+"""s: a way through a port that takes longer from rest to rest is refused (NO_PATH)."""
+CHANNEL_CHECKS = 65
+"""Configurations along the way out of a port from joint angles inside it checked against
+the position limits (the proof and the verification check the move itself)."""
 SAMPLE_PERIOD_RANGE = (0.001, 1.0)
 """s: the shortest and longest step between returned samples (the verification's is 1 ms)."""
 
@@ -105,14 +113,14 @@ class Endpoint:
     label: str
     configs: Tuple[Tuple[Optional[int], np.ndarray], ...]
     """(elbow branch or None for a joint request, q)."""
-    ways_out: Tuple[Optional[np.ndarray], ...] = ()
+    channels: Tuple[Optional[Channel], ...] = ()
     """Per configuration inside a port (a ``<station>:inside`` request, or joint angles
-    inside a port): the configurations out of the port to its retracted pose
-    (``Port.way_out``), else None; empty when no configuration is inside a port."""
+    inside a port): its straight way out to the port's mouth (``moves.channel``), else
+    None; empty when no configuration is inside a port."""
 
-    def way_out(self, k: int) -> Optional[np.ndarray]:
+    def channel(self, k: int) -> Optional[Channel]:
         """Return the way out of a port of configuration ``k`` (None: not inside one)."""
-        return self.ways_out[k] if self.ways_out else None
+        return self.channels[k] if self.channels else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -171,7 +179,12 @@ class Planner:
         self.method = settings.method(cell, settings.timing, settings.shape)
         self._by_load = {cell.robot.load: self}
         self._legs: dict = {}
-        """The stop-and-go legs planned so far (``_leg``), at most ``LEGS_KEPT``."""
+        """The transfers between port mouths planned so far (``_leg``), at most
+        ``LEGS_KEPT``."""
+        self._ends: dict = {}
+        """The ways through ports as free ends (``_free_end``), at most ``LEGS_KEPT``."""
+        self._bounds: dict = {}
+        """The bounds along each channel, or why it has none (``_channel``)."""
         self._legs_lock = threading.Lock()
 
     @property
@@ -219,9 +232,11 @@ class Planner:
                                     f'{role} {value!r}: station {name} has no port (its '
                                     'port: key in the cell file)')
             retracted = {c.elbow: c.q for c in station.configs}
+            port = station.port
             return Endpoint(value, tuple((None if joints else c.elbow, c.q)
                                          for c in station.inside),
-                            tuple(station.port.way_out(robot.arm, c.q, retracted[c.elbow])
+                            tuple(Channel.out_of(robot.arm, c.q, port.axis, port.depth,
+                                                 mouth=retracted[c.elbow])
                                   for c in station.inside))
         try:
             q = np.asarray(value, dtype=float).reshape(-1)
@@ -249,11 +264,17 @@ class Planner:
                 ErrorCode.GOAL_IN_COLLISION
             raise PlanningError(code, f'{role} {q.tolist()} is in collision ({how})')
         label = ','.join(f'{v:g}' for v in q)
-        way = self._way_out(q, role)
-        return Endpoint(label, ((None, q),), () if way is None else (way,))
+        channel = self._channel_of(q, role)
+        return Endpoint(label, ((None, q),), () if channel is None else (channel,))
 
-    def _way_out(self, q: np.ndarray, role: str) -> Optional[np.ndarray]:
-        """Return the way out of the port joint angles ``q`` are inside, None if in none."""
+    def _channel_of(self, q: np.ndarray, role: str) -> Optional[Channel]:
+        """
+        Return the way out of the port joint angles ``q`` are inside, None if in none.
+
+        The wafer centre moves parallel to the port's axis, the blade keeping its heading,
+        out to the port's mouth: refused when ``q`` breaks the port's tolerances, or when
+        the way leaves the position limits.
+        """
         ports = self.cell.port_model
         k = int(ports.inside(q)[0])
         if k < 0:
@@ -262,15 +283,17 @@ class Planner:
         if how is not None:
             raise PlanningError(ErrorCode.OUT_OF_LIMITS, f'{role} {q.tolist()}: {how}')
         port, robot = ports.ports[k], self.cell.robot
-        retracted = port.configurations(robot.arm, np.zeros(1), q[1], near=q[None])[0]
+        length = float(port.offsets(robot.arm.wafer_center(q[None]))[0][0])
+        channel = Channel.out_of(robot.arm, q, port.axis, length)
         lower, upper = robot.limits.position.T
-        if not np.all((retracted >= lower) & (retracted <= upper)):
+        along = channel.configurations(np.linspace(0.0, length, CHANNEL_CHECKS))
+        if not np.all((along >= lower) & (along <= upper)):
             raise PlanningError(ErrorCode.OUT_OF_LIMITS,
                                 f'{role} {q.tolist()} is inside the port of {port.station}, '
-                                f'whose retracted pose on its elbow branch '
-                                f'({retracted.round(4).tolist()}) is beyond '
+                                f'whose way out on its elbow branch (to '
+                                f'{channel.mouth.round(4).tolist()}) leaves '
                                 'robot.joint_limits.position')
-        return port.way_out(robot.arm, q, retracted)
+        return channel
 
     def plan(self, start, goal, deadline: Optional[float] = None,
              branches: Optional[Tuple[Optional[int], Optional[int]]] = None,
@@ -301,13 +324,10 @@ class Planner:
         return self._planned(a, b, deadline, until, begun)
 
     def _planned(self, a: Endpoint, b: Endpoint, deadline: Optional[float],
-                 until: Optional[float], begun: float, stopping: bool = True) -> PlanResult:
-        """
-        Return the fastest verified answer between two resolved ends (``plan``).
-
-        ``stopping``: whether a request through a port also plans its stop-and-go chain
-        (``_stopping``), the bound every non-stop combination must beat.
-        """
+                 until: Optional[float], begun: float) -> PlanResult:
+        """Return the fastest verified answer between two resolved ends (``plan``)."""
+        if a.channels or b.channels:
+            return self._through(a, b, deadline, until, begun, blend=True)
         stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
         prepared, failure = [], None
         for i, (elbow_a, qa) in enumerate(a.configs):
@@ -318,14 +338,12 @@ class Planner:
                                         f'{qa.tolist()}')
                 _check_deadline(deadline)
                 try:
-                    prepared.append(self._prepared(a, b, (qa, a.way_out(i)),
-                                                   (qb, b.way_out(j)), (elbow_a, elbow_b),
+                    prepared.append(self._prepared(a, b, qa, qb, (elbow_a, elbow_b),
                                                    stage_ms))
                 except PlanningError as exc:
                     logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
                     failure = failure or exc
-        stops = self._stopping(a, b, deadline, until, stage_ms)[0] if stopping else None
-        bound = None if stops is None else stops.cycle_time
+        bound = None
         # Most promising first (the method's starting point), so that a combination whose
         # optimisation shows it cannot beat the best so far is given up early.
         candidates, given_up = [], []
@@ -365,157 +383,250 @@ class Planner:
                         checked = None
                     if checked is None:
                         continue
-                if stops is None or candidate.shaped.trajectory.duration < stops.cycle_time:
-                    counts = {'candidates': len(prepared), 'given_up': len(given_up)}
-                    return self._result(candidate, checked, counts, dict(
-                        stage_ms, total=(time.perf_counter() - begun) * 1000.0))
-                given_up = []  # the fastest verified curve is no faster than stopping
-                break
+                counts = {'candidates': len(prepared), 'given_up': len(given_up)}
+                return self._result(candidate, checked, counts, dict(
+                    stage_ms, total=(time.perf_counter() - begun) * 1000.0))
             # Every faster one failed verification: finish those given up after all.
             candidates = [c for c in (self._finished(pair, bound, stage_ms, until, deadline)
                                       for pair in given_up) if c is not None]
             given_up = []
-        if stops is not None:
-            return replace(stops, metrics=dict(stops.metrics, candidates=len(prepared)),
-                           timings_ms=dict(stage_ms,
-                                           total=(time.perf_counter() - begun) * 1000.0))
         raise failure
 
     def stop_and_go(self, start, goal, deadline: Optional[float] = None,
                     load: Optional[str] = None) -> PlanResult:
         """
-        Return the move through a port that stops at the port's mouth, verified (``_stopping``).
+        Return the move through a port that stops at each port mouth, verified (``_through``).
 
-        What ``plan`` returns when no non-stop curve is faster, without looking for one: its
-        legs are short moves into or out of a port and a move between retracted poses, so it
-        takes seconds where ``plan`` may take minutes. Raises PlanningError: INVALID_REQUEST
-        when neither end is inside a port or the move is a single leg, else the first reason
-        no chain could be planned.
+        The same move as ``plan`` without blending the ways through the ports into the
+        transfer: straight out of the start's port to rest at its mouth, the transfer from
+        rest to rest, straight into the goal's port. Raises PlanningError: INVALID_REQUEST
+        when neither end is inside a port, else the first reason none could be planned.
         """
         if load is not None and load != self.load:
             return self.for_load(load).stop_and_go(start, goal, deadline)
         begun = time.perf_counter()
         a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
+        if not (a.channels or b.channels):
+            raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                f'{a.label} -> {b.label} does not stop on its way: neither '
+                                'end is inside a port')
+        return self._through(a, b, deadline, None, begun, blend=False)
+
+    def _through(self, a: Endpoint, b: Endpoint, deadline: Optional[float],
+                 until: Optional[float], begun: float, blend: bool) -> PlanResult:
+        """
+        Return the fastest verified move through a port between two resolved ends.
+
+        Per elbow-branch combination: straight out of the start's port along its axis
+        (``moves.channel``), the transfer between the two port mouths, straight into the
+        goal's port. The transfer is first planned from rest to rest (``_leg``: a move
+        between the mouths, planned once per planner without a budget), which makes the
+        move that stops at the mouths (``moves.through.compose``); with ``blend`` the curve
+        method then optimises the transfer with each mouth a free end
+        (``CurveMethod.blend``: the mouth speeds chosen with the transfer, the ways through
+        the ports timed to meet them), and the faster verified move is kept. Combinations
+        are taken fastest first by the joints' own shortest motion between the mouths plus
+        the ways at their fastest, and given up when that cannot beat the best so far.
+        Every answer is verified as a whole (``verify``).
+        """
         stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
-        result, failure = self._stopping(a, b, deadline, None, stage_ms)
-        if result is None:
-            raise failure or PlanningError(
-                ErrorCode.INVALID_REQUEST, f'{a.label} -> {b.label} does not stop on its way: '
-                'neither end is inside a port, or it only leaves (enters) one')
-        return replace(result, timings_ms=dict(stage_ms,
-                                               total=(time.perf_counter() - begun) * 1000.0))
-
-    def _stopping(self, a: Endpoint, b: Endpoint, deadline: Optional[float],
-                  until: Optional[float], stage_ms: dict) -> tuple:
-        """
-        Return (the fastest stop-and-go answer of a request through a port or None, why not).
-
-        Into or out of a port a move can always stop at the port's mouth: retract to the
-        retracted pose, transfer, extend, each leg planned from rest to rest on the request's
-        elbow branches (``_planned``, without stops of its own), then joined into one curve
-        that stops where they meet (``stops.stopping_curve``) and verified like any other.
-        The fastest over the elbow-branch combinations is what every non-stop curve must
-        beat: so a move through a port is never slower than stopping on its way. None when
-        neither end is inside a port, when the request is a single leg (a retract to its
-        own retracted pose), within a time budget (``until``: the legs would not fit in
-        it), or when no chain could be planned (then with the first PlanningError of a leg,
-        or VERIFICATION_FAILED). Its time goes to ``stage_ms['stopping']``.
-        """
-        if until is not None or not (a.ways_out or b.ways_out):
-            return None, None
         clock = _Clock(stage_ms)
-        best, failure = None, None
+        combinations, failure = [], None
         for i, (elbow_a, qa) in enumerate(a.configs):
             for j, (elbow_b, qb) in enumerate(b.configs):
-                ends = _stops(a, i, 'start') + _stops(b, j, 'goal')[::-1]
-                ends = [e for k, e in enumerate(ends) if k == 0
-                        or not np.array_equal(e.configs[0][1], ends[k - 1].configs[0][1])]
-                if len(ends) < 3:
-                    continue  # one leg: the request itself
+                if np.array_equal(qa, qb):
+                    raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                        f'start and goal are the same configuration '
+                                        f'{qa.tolist()}')
                 try:
-                    chain = [self._leg(start, goal, deadline)
-                             for start, goal in zip(ends, ends[1:])]
+                    ways = [self._channel(a, i), self._channel(b, j)]
                 except PlanningError as exc:
-                    logger.debug('branches %s -> %s: no stop-and-go chain: %s', elbow_a,
-                                 elbow_b, exc)
                     failure = failure or exc
                     continue
-                result = self._joined(a, b, i, j, chain)
+                mouths = [q if way is None else way[0].mouth for q, way in zip((qa, qb), ways)]
+                fastest = float(self.cell.robot.limits.shortest_motion(
+                    mouths[1] - mouths[0]).max()) + sum(
+                        self._free_end(way).least_time for way in ways if way is not None)
+                combinations.append((fastest, i, j, ways, mouths))
+        clock.lap('corridor')
+        best, tried = None, 0
+        for fastest, i, j, ways, mouths in sorted(combinations, key=lambda c: c[0]):
+            _check_deadline(deadline)
+            if best is not None and fastest >= best.cycle_time:
+                continue
+            (elbow_a, _), (elbow_b, _) = a.configs[i], b.configs[j]
+            if np.array_equal(*mouths):
+                # Only out of a port to its mouth, or only in: the way alone.
+                result = self._answer(a, b, i, j, None, compose(None, *ways), {}, ())
                 if result is None:
                     failure = failure or PlanningError(
-                        ErrorCode.VERIFICATION_FAILED, f'the stop-and-go chain {a.label} -> '
-                        f'{b.label} failed verification')
+                        ErrorCode.VERIFICATION_FAILED,
+                        f'the move {a.label} -> {b.label} failed verification')
                 elif best is None or result.cycle_time < best.cycle_time:
-                    best = result
-        clock.lap('stopping')
-        return best, failure
+                    best, tried = result, tried + 1
+                continue
+            ends = [Endpoint(end.label if way is None else _mouth_label(end, role),
+                             ((elbow, mouth),))
+                    for end, role, way, elbow, mouth in zip(
+                        (a, b), ('start', 'goal'), ways, (elbow_a, elbow_b), mouths)]
+            try:
+                transfer = self._leg(*ends, deadline, until)
+                stop = compose(transfer.trajectory, *ways)
+            except PlanningError as exc:
+                logger.debug('branches %s -> %s: no transfer: %s', elbow_a, elbow_b, exc)
+                failure = failure or exc
+                continue
+            tried += 1
+            moves = [(stop, transfer.metrics, transfer.warnings)]
+            if blend:
+                clock.lap('stopping')
+                with collecting(stage_ms):
+                    shaped = self.method.blend(
+                        transfer.trajectory, [None if way is None else self._free_end(way)
+                                              for way in ways],
+                        None if best is None else best.cycle_time, until, deadline)
+                clock.lap('optimise')
+                if shaped is not None:
+                    moves.insert(0, (compose(shaped.trajectory, *ways),
+                                     dict(transfer.metrics, **shaped.metrics),
+                                     transfer.warnings + shaped.warnings))
+            for move, metrics, warnings in moves:
+                if best is not None and move.duration >= best.cycle_time:
+                    continue
+                result = self._answer(a, b, i, j, transfer, move, metrics, warnings)
+                clock.lap('verify')
+                if result is None:
+                    failure = failure or PlanningError(
+                        ErrorCode.VERIFICATION_FAILED,
+                        f'the move {a.label} -> {b.label} failed verification')
+                    continue
+                best = result
+                break
+        if best is None:
+            raise failure or PlanningError(ErrorCode.NO_PATH,
+                                           f'no move from {a.label} to {b.label}')
+        return replace(best, metrics=dict(best.metrics, candidates=len(combinations),
+                                          given_up=len(combinations) - tried),
+                       timings_ms=dict(stage_ms,
+                                       total=(time.perf_counter() - begun) * 1000.0))
 
-    def _leg(self, start: Endpoint, goal: Endpoint, deadline: Optional[float]) -> PlanResult:
+    def _channel(self, end: Endpoint, k: int) -> Optional[tuple]:
         """
-        Return the leg from ``start`` to ``goal``, each of one configuration, planned once.
+        Return (Channel, Bounds) of configuration ``k``'s way out of its port, or None.
 
-        A retract or extend serves every move through its port (the station table's six
-        loaded pairs of the default cell need 10 of them, not 24): the last ``LEGS_KEPT``
-        are kept, by their ends' configurations (and ways out).
+        The bounds are this planner's limit set's along it (``channel_bounds``).
         """
-        key = tuple((end.configs[0][0], end.configs[0][1].tobytes(),
-                     None if end.way_out(0) is None else end.way_out(0).tobytes())
-                    for end in (start, goal))
+        channel = end.channel(k)
+        if channel is None:
+            return None
+        key = (channel.inside.tobytes(), channel.mouth.tobytes(), channel.length)
+        with self._legs_lock:
+            found = self._bounds.get(key)
+        if found is None:
+            try:
+                found = channel_bounds(channel, self.cell.robot)
+            except ValueError as exc:
+                found = str(exc)
+            else:
+                took = profile(channel.length, 0.0, found).duration
+                if took > MAX_WAY_TIME:
+                    found = (f'its straight way out of the port takes {took:.1f} s at the '
+                             f'{self.load} limits (over {MAX_WAY_TIME:g} s: the arm is nearly '
+                             'folded or stretched along it)')
+            with self._legs_lock:
+                if len(self._bounds) >= LEGS_KEPT:
+                    del self._bounds[next(iter(self._bounds))]
+                self._bounds[key] = found
+        if isinstance(found, str):
+            raise PlanningError(ErrorCode.NO_PATH, f'{end.label}: {found}')
+        return channel, found
+
+    def _free_end(self, way: tuple) -> FreeEnd:
+        """Return a way through a port as the transfer's free end (kept per channel)."""
+        channel, bounds = way
+        key = (channel.inside.tobytes(), channel.mouth.tobytes(), bounds)
+        with self._legs_lock:
+            end = self._ends.get(key)
+        if end is None:
+            end = free_end(channel, bounds)
+            with self._legs_lock:
+                if len(self._ends) >= LEGS_KEPT:
+                    del self._ends[next(iter(self._ends))]
+                self._ends[key] = end
+        return end
+
+    def _leg(self, start: Endpoint, goal: Endpoint, deadline: Optional[float],
+             until: Optional[float] = None) -> PlanResult:
+        """
+        Return the move from ``start`` to ``goal``, each of one configuration, planned once.
+
+        A transfer between two port mouths serves every move through those ports: the last
+        ``LEGS_KEPT`` planned without a budget are kept, by their ends' configurations. One
+        planned within a budget (``until``) is not kept, unless none was planned without.
+        """
+        key = tuple((end.configs[0][0], end.configs[0][1].tobytes()) for end in (start, goal))
         with self._legs_lock:
             leg = self._legs.get(key)
         if leg is None:
-            leg = self._planned(start, goal, deadline, None, time.perf_counter(),
-                                stopping=False)
-            with self._legs_lock:
-                if len(self._legs) >= LEGS_KEPT:
-                    del self._legs[next(iter(self._legs))]
-                self._legs[key] = leg
+            leg = self._planned(start, goal, deadline, until, time.perf_counter())
+            if until is None:
+                with self._legs_lock:
+                    if len(self._legs) >= LEGS_KEPT:
+                        del self._legs[next(iter(self._legs))]
+                    self._legs[key] = leg
         return leg
 
-    def _joined(self, a: Endpoint, b: Endpoint, i: int, j: int,
-                chain: list) -> Optional[PlanResult]:
-        """Return the legs joined into one verified answer from ``a`` to ``b``, else None."""
-        trajectory = stopping_curve([leg.trajectory for leg in chain], self.cell.robot,
-                                    self.settings.timing)
+    def _answer(self, a: Endpoint, b: Endpoint, i: int, j: int,
+                transfer: Optional[PlanResult], move: PortMove, metrics: Mapping,
+                warnings) -> Optional[PlanResult]:
+        """
+        Return a move through a port from ``a`` to ``b`` as a verified answer, else None.
+
+        ``transfer``: the planned transfer the move's was made from (None: a way alone).
+        """
         qa, qb = a.configs[i][1], b.configs[j][1]
-        checked = verify(trajectory, self.cell, qa, qb)
+        checked = verify(move, self.cell, qa, qb)
         if not checked.ok:
-            logger.warning('the stop-and-go chain %s -> %s failed verification: %s', a.label,
-                           b.label, '; '.join(checked.problems))
+            logger.warning('the move %s -> %s failed verification: %s', a.label, b.label,
+                           '; '.join(checked.problems))
             return None
-        times, positions, velocities, accelerations = trajectory.samples(
+        times, positions, velocities, accelerations = move.samples(
             self.settings.sample_period)
-        transfer = chain[1] if a.way_out(i) is not None else chain[0]
-        path = np.concatenate([chain[0].path] + [leg.path[1:] for leg in chain[1:]])
+        roadmap_path = np.empty((0, 3)) if transfer is None else transfer.roadmap_path
+        path = np.stack([qa, qb]) if transfer is None else np.concatenate(
+            [qa[None]] * (move.out is not None) + [transfer.path]
+            + [qb[None]] * (move.into is not None))
         branches = (a.configs[i][0], b.configs[j][0])
+        speeds = [0.0 if way is None else way.profile.end_speed
+                  for way in (move.out, move.into)]
+        braking = [0.0 if way is None else -way.profile.end_acceleration
+                   for way in (move.out, move.into)]
+        stops = sum(way is not None and way.profile.end_speed == 0.0
+                    for way in (move.out, move.into))
         return PlanResult(
             start=a, goal=b, start_q=qa, goal_q=qb, branches=branches, load=self.load,
-            trajectory=trajectory,
-            initial_cycle_time=max(sum(leg.initial_cycle_time for leg in chain),
-                                   trajectory.duration),
+            trajectory=move,
+            initial_cycle_time=move.in_port_time + (
+                0.0 if transfer is None else transfer.initial_cycle_time),
             verification=checked, times=times, positions=positions, velocities=velocities,
-            accelerations=accelerations, roadmap_path=transfer.roadmap_path, path=path,
-            metrics=dict(method=self.method.name, stops=len(chain) - 1,
-                         legs_cycle_time=sum(leg.cycle_time for leg in chain),
-                         roadmap_path_vertices=len(transfer.roadmap_path),
+            accelerations=accelerations, roadmap_path=roadmap_path, path=path,
+            metrics=dict(metrics, method=self.method.name, stops=stops,
+                         start_mouth_speed=speeds[0], goal_mouth_speed=speeds[1],
+                         start_mouth_braking=braking[0], goal_mouth_braking=braking[1],
+                         in_port_time=move.in_port_time,
+                         transfer_time=move.duration - move.in_port_time,
+                         roadmap_path_vertices=len(roadmap_path),
                          path_vertices=len(path),
-                         control_points=len(trajectory.control_points),
-                         branches=list(branches), **path_lengths(self.cell, trajectory)),
-            warnings=sum((leg.warnings for leg in chain), ()))
+                         control_points=0 if move.transfer is None else len(
+                             move.transfer.control_points),
+                         branches=list(branches), **path_lengths(self.cell, move)),
+            warnings=tuple(warnings))
 
-    def _prepared(self, a, b, start, goal, branches, stage_ms) -> '_Prepared':
-        """
-        Return the path, corridor and the method's draft between two configurations.
-
-        ``start``, ``goal``: (q, its way out of a port or None). From inside a port the
-        roadmap path starts at its retracted pose, and the corridor's control points are
-        joined to the channel's (``corridor.through_ports``).
-        """
-        (qa, way_a), (qb, way_b) = start, goal
+    def _prepared(self, a, b, qa, qb, branches, stage_ms) -> '_Prepared':
+        """Return the path, corridor and the method's draft between two configurations."""
         model = self.cell.motion_model  # the port margins too: the corridor keeps them
         lipschitz = model.lipschitz
-        route = find_path(self.roadmap, model, lipschitz,
-                          qa if way_a is None else way_a[-1], qb if way_b is None else way_b[-1])
+        route = find_path(self.roadmap, model, lipschitz, qa, qb)
         stage_ms['connect'] += route.connect_ms
         stage_ms['search'] += route.search_ms
         if route.path is None:
@@ -530,9 +641,6 @@ class Planner:
         corridor = build_corridor(path, model.body_clearance(path), lipschitz,
                                   per_body=self.settings.per_body_boxes,
                                   extra=self.settings.extra_points)
-        corridor = through_ports(corridor, way_a, None if way_b is None else way_b[::-1])
-        path = np.concatenate([qa[None] if way_a is not None else path[:0], path,
-                               qb[None] if way_b is not None else path[:0]])
         clock.lap('corridor')
         draft = self.method.draft(corridor)
         clock.lap('spline')
@@ -684,24 +792,13 @@ def _only_branch(end: Endpoint, elbow, role: str) -> Endpoint:
                             f'{role} {end.label} has no elbow branch {elbow!r} (it has '
                             f'{[c[0] for c in end.configs]})')
     return replace(end, configs=configs,
-                   ways_out=tuple(end.ways_out[k] for k in kept) if end.ways_out else ())
+                   channels=tuple(end.channels[k] for k in kept) if end.channels else ())
 
 
-def _stops(end: Endpoint, k: int, role: str) -> list:
-    """
-    Return configuration ``k`` of an end, then its retracted pose if it is inside a port.
-
-    Each is an ``Endpoint`` of that one configuration (``role``: the end's, start or goal);
-    the retracted pose of a ``<station>:inside`` end is labelled with the station's name.
-    """
-    elbow, q = end.configs[k]
-    here = Endpoint(end.label, ((elbow, q),), (end.way_out(k),) if end.ways_out else ())
-    way = end.way_out(k)
-    if way is None:
-        return [here]
-    label = end.label[:-len(INSIDE)] if end.label.endswith(INSIDE) else \
-        f'the retracted pose of the {role}'
-    return [here, Endpoint(label, ((elbow, way[-1]),))]
+def _mouth_label(end: Endpoint, role: str) -> str:
+    """Return the label of where an end inside a port leaves it: its station's name."""
+    return end.label[:-len(INSIDE)] if end.label.endswith(INSIDE) else \
+        f'the port mouth of the {role}'
 
 
 def _check_deadline(deadline: Optional[float]) -> None:

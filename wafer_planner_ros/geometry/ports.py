@@ -102,25 +102,6 @@ class Port:
         q[np.asarray(s) == 0.0] = start_q  # the station's configuration, not its rounding
         return q
 
-    def way_out(self, arm, q: np.ndarray, retracted_q: np.ndarray,
-                step: float = CHANNEL_STEP) -> np.ndarray:
-        """
-        Return the configurations (K, 3) from ``q`` inside the port out to ``retracted_q``.
-
-        ``q`` first and ``retracted_q`` (the retracted pose on the same elbow branch) last;
-        between them the configurations on the axis with the port's heading about ``step``
-        m apart, each angle continued from ``q`` (no wrap by 2 pi).
-        """
-        q, retracted_q = np.asarray(q, float), np.asarray(retracted_q, float)
-        depth = float(self.offsets(arm.wafer_center(q[None]))[0][0])
-        count = max(int(np.ceil(depth / step)), 1)
-        s = np.linspace(depth, 0.0, count + 1)[1:-1]
-        between = np.empty((0, 3))
-        if len(s):
-            between = np.unwrap(np.vstack([q, self.configurations(arm, s, q[1])]),
-                                axis=0)[1:]
-        return np.vstack([q, between, retracted_q])
-
     def configurations(self, arm, s: np.ndarray, elbow: float, near=None) -> np.ndarray:
         """
         Return the configurations placing the wafer ``s`` m into the port on a branch.

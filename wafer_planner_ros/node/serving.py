@@ -8,12 +8,10 @@ out those that fail, and hands it all over as a ``Serving``: a
 ``service.planning.PlanningService`` with the tables as its cache. From then on the node is
 ready. What the tables lack of what they are to hold (``table_groups``: the station pairs
 loaded; with ``planning.station_table_ports`` also empty, then the port pairs loaded and
-empty, first as they stop at the port mouths, then in full), or rejected, is planned then,
-group by group (``build_station_tables``; ``table_to_plan`` says whether), the table stored
-and handed to the service as each pair is planned: the quick station pairs are answered
-from the table within seconds, each port pair stopping at the port mouths seconds later,
-and non-stop once its full plan, minutes to most of an hour later, replaces that. How a
-request is answered is the service's to say.
+empty), or rejected, is planned then, group by group (``build_station_tables``;
+``table_to_plan`` says whether), the table stored and handed to the service as each pair
+is planned: each pair is answered from the table a second or two after the one before.
+How a request is answered is the service's to say.
 """
 
 from dataclasses import dataclass
@@ -62,21 +60,18 @@ def progress_reporter(logger):
 
 def table_groups(planner: Planner, settings) -> list:
     """
-    Return what the station tables are to hold, in the order planned: [(load, pairs, stopping)].
+    Return what the station tables are to hold, in the order planned: [(load, pairs)].
 
     The station pairs loaded; with ``station_table_ports`` the same empty, then the port
-    pairs loaded and empty as they stop at the port mouths (``stopping``: seconds a pair,
-    ``build_table``), then the same in full (minutes to most of an hour a pair). None
-    without ``station_table``.
+    pairs loaded and empty. None without ``station_table``.
     """
     if not settings.station_table:
         return []
-    groups = [(LOADED, station_pairs(planner.cell), False)]
+    groups = [(LOADED, station_pairs(planner.cell))]
     ports = port_pairs(planner.cell)
     if settings.station_table_ports:
-        groups.append((EMPTY, station_pairs(planner.cell), False))
-        groups += [(load, ports, stopping) for stopping in (True, False)
-                   for load in (LOADED, EMPTY) if ports]
+        groups.append((EMPTY, station_pairs(planner.cell)))
+        groups += [(load, ports) for load in (LOADED, EMPTY) if ports]
     return groups
 
 
@@ -85,7 +80,7 @@ def load_station_tables(planner: Planner, settings, logger) -> Dict[str, Station
     if settings.cache_dir is None:
         return {}
     tables = {}
-    for load in dict.fromkeys(load for load, _, _ in table_groups(planner, settings)):
+    for load in dict.fromkeys(load for load, _ in table_groups(planner, settings)):
         try:
             table = load_table(whole_curve(planner).for_load(load), settings.cache_dir)
         except TableError as exc:
@@ -102,7 +97,7 @@ def load_station_tables(planner: Planner, settings, logger) -> Dict[str, Station
 def table_to_plan(planner: Planner, tables: Dict[str, StationTable], settings) -> bool:
     """Return whether the loaded station tables lack any pair they are to hold."""
     groups = table_groups(planner, settings)
-    return any(lacking(tables.get(load), pairs) for load, pairs, _ in groups)
+    return any(lacking(tables.get(load), pairs) for load, pairs in groups)
 
 
 def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, StationTable],
@@ -112,26 +107,25 @@ def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, S
 
     ``tables``: those loaded; after each pair the table is stored and handed on,
     ``publish(load, table)``: a pair is answered from the table as soon as it is planned
-    (the moves through the ports take minutes each).
+    (a second or two each).
     """
     tables = dict(tables)
-    whole = whole_curve(planner)  # one planner per limit set: its legs serve every pair
-    for load, pairs, stopping in table_groups(planner, settings):
-        missing = lacking(tables.get(load), pairs, stopping)
+    whole = whole_curve(planner)  # one planner per limit set: its transfers serve every pair
+    for load, pairs in table_groups(planner, settings):
+        missing = lacking(tables.get(load), pairs)
         if not missing:
             continue
         begun = time.monotonic()
-        how = ', stopping at the port mouths' if stopping else ''
-        logger.info(f'station table ({load}): planning {len(missing)} pairs{how}, e.g. '
+        logger.info(f'station table ({load}): planning {len(missing)} pairs, e.g. '
                     f'{"->".join(missing[0])}')
         # The empty moves take the loaded one's curve where that is faster (and verifies).
         donor = tables.get(LOADED) if load == EMPTY else None
         for done, pair in enumerate(missing, 1):
             table = tables[load] = build_and_store_table(
                 whole.for_load(load), settings.cache_dir, None,
-                logger.warning, tables.get(load), [pair], donor, stopping)
+                logger.warning, tables.get(load), [pair], donor)
             publish(load, table)
-            logger.info(f'station table ({load}): {done}/{len(missing)} pairs planned{how} '
+            logger.info(f'station table ({load}): {done}/{len(missing)} pairs planned '
                         f'({"->".join(pair)}, {time.monotonic() - begun:.1f} s)')
         _report(table, logger)
 

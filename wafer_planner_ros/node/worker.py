@@ -14,7 +14,7 @@ does the roadmap serve: the node is ready when it can answer, and until then eve
 is answered ``ROADMAP_NOT_READY`` at once, saying why. What the cached station tables lack
 is planned next, group by group, each handed to the service as it is planned
 (``serving.table_groups``: the station pairs, then the empty moves, then the moves through
-the ports stopping at the port mouths, then those in full), and so are the pairs whose
+the ports, loaded and empty), and so are the pairs whose
 cached entries failed verification (``busy_with: station_table``), pairs the tables do not
 hold yet being planned within the budget meanwhile. A rebuild does the same while the
 previous roadmap serves, and keeps it serving when it fails (``rebuild_failed`` in the

@@ -1,8 +1,8 @@
 """
 The station table: the loadport-loadlock pairs planned once, kept on disk, answered at once.
 
-Station pairs are a fab's hot path, and the best trajectories take seconds to find
-(``trajectory.shape``), the moves through the ports minutes. A table holds the moves of one
+Station pairs are a fab's hot path, and the best trajectories take a second or more to
+find (``trajectory.shape``), as do the moves through the ports. A table holds the moves of one
 limit set (``Planner.load``: loaded or empty). ``build_table`` plans the pairs asked of
 ``table_pairs`` with a planner (one direction of each; the other is the same motion
 backwards): the ``station_pairs`` (retracted pose to retracted pose) and the ``port_pairs``
@@ -28,12 +28,6 @@ be (``_described``). An entry that fails is left out and listed in
 ``rejected`` with the reason, never answered from; ``build_table`` given the loaded table
 plans those pairs again (``load_or_build_table`` does, and stores the table). Files are
 written to a temporary name and renamed, so a crash never leaves half a file.
-
-The port pairs' non-stop curves take minutes each to optimise. ``build_table`` with
-``stopping`` plans them first as they stop at the port mouths (``Planner.stop_and_go``,
-seconds each): those entries are ``provisional`` (a flag in their metrics), answered from
-like any other, and ``lacking`` to a build without ``stopping``, which plans them in full
-(``Planner.plan``: non-stop, unless stopping is faster) and replaces them.
 
 A re-taught station re-plans only its own pairs: a file also stores the SHA-256 of what its
 plans depend on besides the stations (the cell without its stations and name, the planner's
@@ -195,7 +189,7 @@ def table_path(cache_dir, key: str) -> Path:
 def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], None]] = None,
                 loaded: Optional[StationTable] = None,
                 pairs: Optional[Sequence[Tuple[str, str]]] = None,
-                donor: Optional[StationTable] = None, stopping: bool = False) -> StationTable:
+                donor: Optional[StationTable] = None) -> StationTable:
     """
     Plan the ``pairs`` of ``table_pairs`` (default: every station pair); return the table.
 
@@ -210,11 +204,6 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     the table of another limit set, ``donor`` (the loaded moves' for the empty ones), its
     curve of a pair is taken instead when it is faster than the one planned and passes
     this planner's verification (``Planner.faster``).
-
-    ``stopping``: plan each pair through the ports as it stops at the port mouths
-    (``Planner.stop_and_go``: seconds, where the non-stop optimisation takes minutes),
-    stored ``provisional``: answered from at once, and planned in full by a build without
-    ``stopping`` (``lacking``). A pair whose chain cannot be planned is left for that build.
     """
     begun = time.perf_counter()
     entries = dict(loaded.entries) if loaded is not None else {}
@@ -225,25 +214,20 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     if unknown:
         raise ValueError(f'{"->".join(unknown[0])} is not a pair a station table holds')
     pairs = _lacking(entries, failures,
-                     station_pairs(planner.cell) if pairs is None else pairs, stopping)
+                     station_pairs(planner.cell) if pairs is None else pairs)
     for done, (start, goal) in enumerate(pairs, 1):
         pair = (start, goal)
         try:
             back = entries.get((goal, start))
-            if back is None or (provisional(back) and not stopping):
-                result = planner.stop_and_go(start, goal) if stopping else \
-                    planner.plan(start, goal)
+            if back is None:
+                result = planner.plan(start, goal)
                 if donor is not None and pair in donor.entries:
                     result = planner.faster(result, donor.answer(planner, start, goal))
-                entries[pair], verified[pair] = _entry(result, stopping), result.verification
+                entries[pair], verified[pair] = _entry(result), result.verification
             else:
                 entries[pair], verified[pair] = _reversed(planner, pair, back)
         except PlanningError as exc:
-            if stopping:
-                logger.warning('station table: %s -> %s does not stop at the port mouths: %s',
-                               start, goal, exc)
-            else:
-                failures[pair] = f'{exc.code.value}: {exc.message}'
+            failures[pair] = f'{exc.code.value}: {exc.message}'
         if progress is not None:
             progress(done, len(pairs), f'{start}->{goal}')
     return StationTable(table_key(planner), entries, verified, failures,
@@ -253,27 +237,15 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
                         basis=table_basis(planner), stations=station_digests(planner.cell))
 
 
-def lacking(table: Optional[StationTable], pairs: Sequence[Tuple[str, str]],
-            stopping: bool = False) -> list:
-    """
-    Return the ``pairs`` a table (None: none) neither holds nor records as not plannable.
-
-    A pair held by a ``provisional`` entry is lacking too, unless ``stopping`` (what a
-    ``build_table`` with ``stopping`` plans).
-    """
+def lacking(table: Optional[StationTable], pairs: Sequence[Tuple[str, str]]) -> list:
+    """Return the ``pairs`` a table (None: none) neither holds nor records as not plannable."""
     if table is None:
         return list(pairs)
-    return _lacking(table.entries, table.failures, pairs, stopping)
+    return _lacking(table.entries, table.failures, pairs)
 
 
-def _lacking(entries: dict, failures: dict, pairs, stopping: bool) -> list:
-    return [pair for pair in pairs if pair not in failures and (
-        pair not in entries or not stopping and provisional(entries[pair]))]
-
-
-def provisional(entry: dict) -> bool:
-    """Return whether an entry is a move that stops at the port mouths, planned in full later."""
-    return entry['metrics'].get('provisional') is True
+def _lacking(entries: dict, failures: dict, pairs) -> list:
+    return [pair for pair in pairs if pair not in failures and pair not in entries]
 
 
 def save_table(table: StationTable, cache_dir) -> Path:
@@ -421,19 +393,18 @@ def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
                           warn: Callable[[str], None] = logger.warning,
                           loaded: Optional[StationTable] = None,
                           pairs: Optional[Sequence[Tuple[str, str]]] = None,
-                          donor: Optional[StationTable] = None,
-                          stopping: bool = False) -> StationTable:
+                          donor: Optional[StationTable] = None) -> StationTable:
     """
     Build the table of ``pairs`` and, with a cache directory, store it (``warn`` if not).
 
     Given a table ``loaded`` from the cache, only its rejected pairs and the ``pairs`` it
     lacks are planned (see ``build_table``); without one, an earlier table's entries for
     unchanged stations are inherited (``inherited_table``) and only the other pairs planned.
-    ``donor``, ``stopping``: see ``build_table``.
+    ``donor``: see ``build_table``.
     """
     if loaded is None and cache_dir is not None:
         loaded = inherited_table(planner, cache_dir)
-    table = build_table(planner, progress, loaded, pairs, donor, stopping)
+    table = build_table(planner, progress, loaded, pairs, donor)
     if cache_dir is not None:
         try:
             save_table(table, cache_dir)
@@ -442,14 +413,9 @@ def build_and_store_table(planner: Planner, cache_dir=None, progress=None,
     return table
 
 
-def _entry(result: PlanResult, stopping: bool = False) -> dict:
-    """
-    Return what the table keeps of a plan (plain data; an answer's ``source`` is not).
-
-    ``stopping``: the plan is ``Planner.stop_and_go``'s, ``provisional`` until planned in full.
-    """
+def _entry(result: PlanResult) -> dict:
+    """Return what the table keeps of a plan (plain data; an answer's ``source`` is not)."""
     metrics = {name: value for name, value in result.metrics.items() if name != 'source'}
-    metrics['provisional'] = stopping
     return _stored(result.branches, result.trajectory, result.initial_cycle_time,
                    result.roadmap_path, result.path, metrics, result.warnings,
                    result.timings_ms['total'])
@@ -541,15 +507,15 @@ def _ends(planner: Planner, pair, branches, retracted: bool = False) -> list:
     """
     Return the configurations of a pair's ends (stations, or inside ports) on the branches.
 
-    ``retracted``: an end inside a port as its retracted pose (the end of its way out).
+    ``retracted``: an end inside a port as its port's mouth (the end of its way out).
     """
     ends = []
     for name, branch, role in zip(pair, branches, ('start', 'goal')):
         end = planner.endpoint(name, role)
         k = next(k for k, (elbow, _) in enumerate(end.configs)
                  if elbow is None or elbow == branch)
-        way = end.way_out(k) if retracted else None
-        ends.append(end.configs[k][1] if way is None else way[-1])
+        channel = end.channel(k) if retracted else None
+        ends.append(end.configs[k][1] if channel is None else channel.mouth)
     return ends
 
 
@@ -572,13 +538,18 @@ def _result(planner: Planner, pair, entry: dict, verification: Verification,
     start, goal = (planner.endpoint(name, role) for name, role in zip(pair, ('start', 'goal')))
     times, positions, velocities, accelerations = trajectory.samples(
         planner.settings.sample_period)
-    branches = [int(branch) for branch in entry['branches']]
-    # Measured on the curve: its description's control points (a kind without any has 0).
+    # A station given by joint angles has no elbow branch (None).
+    branches = [None if branch is None else int(branch) for branch in entry['branches']]
+    # Measured on the curve: its description's control points, or its transfer's (a kind
+    # without any has 0).
+    description = trajectory.describe()
+    points = description.get('control_points') or (
+        description.get('transfer') or {}).get('control_points', ())
     metrics = dict(
         described['counts'], method=method,
         roadmap_path_vertices=len(described['roadmap_path']),
         path_vertices=len(described['path']),
-        control_points=len(trajectory.describe().get('control_points', ())),
+        control_points=len(points),
         branches=branches, **lengths, source='table')
     start_q, goal_q = trajectory.evaluate([0.0, trajectory.duration])
     return PlanResult(

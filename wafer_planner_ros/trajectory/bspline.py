@@ -218,11 +218,33 @@ class CubicBSpline(Trajectory):
         points must be finite, the first two exactly ``start`` and the last two exactly
         ``goal`` (equal neighbours: zero velocity at the ends).
         """
-        knots, points = np.asarray(self.knots), np.asarray(self.control_points)
+        problem = self.structure_problem(len(np.asarray(start)))
+        if problem is not None:
+            return problem
+        points = np.asarray(self.control_points)
         start, goal = np.asarray(start, float), np.asarray(goal, float)
-        if points.ndim != 2 or len(points) < DEGREE + 1 or points.shape[1] != len(start):
+        last = len(points) - 1
+        at_rest = ': the motion does not {} at rest'
+        for i, end, name, why in ((0, start, 'start', ''), (last, goal, 'goal', ''),
+                                  (1, start, 'start', at_rest.format('start')),
+                                  (last - 1, goal, 'goal', at_rest.format('end'))):
+            if not np.array_equal(points[i], end):
+                return f'control point {i} is {points[i].tolist()}, not the {name} ' \
+                    f'{end.tolist()}{why}'
+        return None
+
+    def structure_problem(self, joints: int = 3) -> Optional[str]:
+        """
+        Return what makes the data no clamped cubic B-spline of ``joints`` joints, or None.
+
+        Its knots must be finite, four more than the control points, the first four 0, the
+        last four one time T and those between increasing (every span lasts); the control
+        points finite.
+        """
+        knots, points = np.asarray(self.knots), np.asarray(self.control_points)
+        if points.ndim != 2 or len(points) < DEGREE + 1 or points.shape[1] != joints:
             return (f'the control points have the shape {points.shape}, not (n >= '
-                    f'{DEGREE + 1}, {len(start)})')
+                    f'{DEGREE + 1}, {joints})')
         if knots.shape != (len(points) + DEGREE + 1,):
             return (f'the curve has {knots.size} knots for {len(points)} control points, not '
                     f'{len(points) + DEGREE + 1}')
@@ -243,14 +265,6 @@ class CubicBSpline(Trajectory):
         bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
         if len(bad):
             return f'control point {bad[0]} is {points[bad[0]].tolist()}, not finite'
-        last = len(points) - 1
-        at_rest = ': the motion does not {} at rest'
-        for i, end, name, why in ((0, start, 'start', ''), (last, goal, 'goal', ''),
-                                  (1, start, 'start', at_rest.format('start')),
-                                  (last - 1, goal, 'goal', at_rest.format('end'))):
-            if not np.array_equal(points[i], end):
-                return f'control point {i} is {points[i].tolist()}, not the {name} ' \
-                    f'{end.tolist()}{why}'
         return None
 
     def breaks(self) -> np.ndarray:

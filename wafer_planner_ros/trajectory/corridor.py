@@ -21,7 +21,7 @@ changes freely. (With the paper's points alone a span's hull can reach from one 
 to the next segment, outside both.)
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,10 +44,7 @@ class Corridor:
     exits: np.ndarray
     """(P - 2, 3) where the outgoing segment leaves each box."""
     control_points: np.ndarray
-    """(6 + 5 (P - 2), 3), and the channels' points of ``through_ports``."""
-    proven: bool = True
-    """Every curve through the control points is free, whatever its timing (the convex
-    hull); False where they follow a port's channel: each curve is proven on its own."""
+    """(6 + 5 (P - 2), 3)."""
 
 
 def simplify(path: np.ndarray) -> np.ndarray:
@@ -90,31 +87,6 @@ def build_corridor(path: np.ndarray, body_clearances: np.ndarray, constants: np.
     points += [path[-1:]] * 3
     return Corridor(path=path, half_widths=half, entries=entries, exits=exits,
                     control_points=np.concatenate(points))
-
-
-def through_ports(corridor: Corridor, way_out=None, way_in=None) -> Corridor:
-    """
-    Return the corridor with the move out of a port before it and into one after it.
-
-    ``way_out``: the configurations from the start inside a port to its retracted pose, the
-    corridor's start (``Port.way_out``); ``way_in``: those from the corridor's goal, a
-    retracted pose, into a port (the goal's ``way_out`` reversed). Each is joined with
-    three control points at both its ends, so that the curve through them stops at the
-    retracted pose as the corridor's own would; the whole-curve optimisation then removes
-    the stop. The channel's joint-space curve is not straight, so no convex-hull argument
-    covers its curves (the corridor is no longer ``proven``): ``proof.prove`` does, curve
-    by curve.
-    """
-    if way_out is None and way_in is None:
-        return corridor
-    points = corridor.control_points
-    if way_out is not None:
-        points = np.concatenate([way_out[:1], way_out[:1], way_out, way_out[-1:],
-                                 way_out[-1:], points[3:]])
-    if way_in is not None:
-        points = np.concatenate([points[:-3], way_in[:1], way_in[:1], way_in,
-                                 way_in[-1:], way_in[-1:]])
-    return replace(corridor, control_points=points, proven=False)
 
 
 def _box_exit(centre: np.ndarray, towards: np.ndarray, half: np.ndarray) -> np.ndarray:

@@ -19,7 +19,6 @@ from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
 from wafer_planner_ros.trajectory.coarse import coarse_start
 from wafer_planner_ros.trajectory.corridor import Corridor
 from wafer_planner_ros.trajectory.curve import Trajectory
-from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape import optimise_shape
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
@@ -78,6 +77,19 @@ class CurveMethod(ABC):
         (``time.monotonic()``), which no work may reach: what a method does beyond
         ``until`` stops half-way to it, leaving time to verify and answer.
         """
+
+    def blend(self, transfer: CubicBSpline, ends, give_up_above: Optional[float] = None,
+              until: Optional[float] = None,
+              deadline: Optional[float] = None) -> Optional[Shaped]:
+        """
+        Return ``transfer`` made to move on at its free ends, or None (see ``ShapeProblem``).
+
+        ``ends``: the start's and the goal's ``FreeEnd`` (None: at rest there). ``transfer``
+        is at rest at both ends, proven and within every limit. None when the method does
+        not blend (the move then stops at those ends), or once the curve and its ends
+        cannot beat ``give_up_above`` s together. The default: no blending.
+        """
+        return None
 
 
 class KnotTiming(CurveMethod):
@@ -147,10 +159,7 @@ class WholeCurve(KnotTiming):
                deadline: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
         start, corridor = draft.work
-        shape = self.shape if corridor.proven else replace(
-            self.shape, one_margin_outside=True, max_rounds=self.shape.port_max_rounds,
-            qp_iterations=self.shape.port_qp_iterations)
-        spans = shape.coarse_spans if corridor.proven else shape.port_coarse_spans
+        shape, spans = self.shape, self.shape.coarse_spans
         coarse = optimise_shape(
             coarse_start(corridor.control_points, spans, self.cell.robot, self.settings),
             self.cell, replace(shape, min_spans=spans), self.settings,
@@ -165,14 +174,9 @@ class WholeCurve(KnotTiming):
         fitted = coarse.trajectory is not None
         timed = None if fitted else super().finish(start, deadline=deadline)
         begin = coarse.trajectory if fitted else timed.trajectory
-        # Through a port's channel the corridor curve is proven on its own (``through_ports``).
-        proven = fitted or corridor.proven or prove(
-            begin, self.cell.motion_model, self.cell.motion_model.lipschitz).certified
         spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)
-        if fitted:  # refining a proven curve: the usual QP limit (``port_qp_iterations``)
-            shape = replace(shape, qp_iterations=self.shape.qp_iterations)
         shaped = optimise_shape(begin, self.cell, replace(shape, min_spans=spans),
-                                self.settings, give_up_above, until, proven=proven)
+                                self.settings, give_up_above, until)
         if shaped is None:
             return None
         if shaped.trajectory is None:  # nothing proven: the verification refuses it
@@ -195,6 +199,27 @@ class WholeCurve(KnotTiming):
 
         return Shaped(shaped.trajectory, start.estimate, metrics,
                       (timed.warnings if timed else ()) + warnings, fallback)
+
+    def blend(self, transfer: CubicBSpline, ends, give_up_above: Optional[float] = None,
+              until: Optional[float] = None,
+              deadline: Optional[float] = None) -> Optional[Shaped]:
+        """
+        Return the whole-curve optimisation of ``transfer`` with its free ends (``blend``).
+
+        The control points and span durations move with each free end's speed, from the
+        transfer at rest there (``shape.optimise_shape`` with ``ends``); the fine stage's
+        spans. The curve returned is proven; its cycle time is the transfer's alone.
+        """
+        spans = max(self.shape.min_spans, len(transfer.intervals))
+        shaped = optimise_shape(transfer, self.cell, replace(self.shape, min_spans=spans),
+                                self.settings, give_up_above,
+                                min((t for t in (until, _half_way(deadline)) if t is not None),
+                                    default=None), proven=True, ends=ends)
+        if shaped is None or not shaped.improved:
+            return None
+        return Shaped(shaped.trajectory, transfer.duration,
+                      {'optimised': True, 'blend_iterations': shaped.iterations,
+                       'blend_rounds': shaped.rounds, 'spans': shaped.spans})
 
 
 def _past_budget(until: Optional[float], deadline: Optional[float]) -> Optional[float]:

@@ -14,7 +14,8 @@ total time. Constraints:
 - clearance at samples: every body nearer than ``ShapeSettings.watch`` keeps at least
   ``ShapeSettings.clearance`` (less where the start curve itself is closer, so that the
   start stays feasible); the port margins (``geometry.ports``) the same way, as bodies of
-  the cell's ``motion_model``, which the proof uses too.
+  the cell's ``motion_model``, which the proof uses too: they keep a curve that starts
+  or ends at a port's mouth from dipping into the port.
 
 The start meets every limit: the corridor curve (also proven: inside its boxes, λ-scaled
 to every limit) or a curve fitted to the corridor (``coarse``: not proven, so never
@@ -33,15 +34,14 @@ the start (if proven) when none beats it.
 from dataclasses import dataclass
 import logging
 import time
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
-from wafer_planner_ros.geometry.ports import MARGINS
 from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
-from wafer_planner_ros.trajectory.shape_problem import ShapeProblem
+from wafer_planner_ros.trajectory.shape_problem import FreeEnd, POSITION_MARGIN, ShapeProblem
 from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import peaks_over, single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
@@ -51,9 +51,6 @@ logger = logging.getLogger(__name__)
 
 FAILED_SLOWER = 100.0
 """An answer this many times slower than the start is a failed solve, not a curve."""
-POSITION_MARGIN = 1e-6
-"""rad: free control points stay this far inside the position limits, so that rounding
-in evaluating the curve never puts it beyond a limit (a point on the limit did, by 1e-16)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,7 +72,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
                    timing: TimingSettings = TimingSettings(),
                    give_up_above: Optional[float] = None,
                    deadline: Optional[float] = None, proven: bool = True,
-                   first_proven: bool = False) -> Optional[Shaping]:
+                   first_proven: bool = False,
+                   ends: Sequence[Optional[FreeEnd]] = (None, None)) -> Optional[Shaping]:
     """
     Return the fastest proven curve from a start that meets every limit (see the module).
 
@@ -87,9 +85,11 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     whether the start is proven collision-free (the corridor curve is; a curve fitted to the
     corridor, ``coarse``, is not): if not, it is never returned. ``first_proven``: return
     the first proven curve, not solving again where the wafer limit was exceeded between
-    samples (its λ-scaling meets the limit all the same, a little slower).
+    samples (its λ-scaling meets the limit all the same, a little slower). ``ends``: the
+    start's and the goal's ``FreeEnd`` (None: at rest there); with free ends every cycle
+    time compared is the curve's and its ends' paths' together (``ShapeProblem.total``).
     """
-    problem = ShapeProblem(start, cell, shape, timing)
+    problem = ShapeProblem(start, cell, shape, timing, ends)
     current = problem.start
     best = current if proven else None
     spans = problem.spans
@@ -112,6 +112,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
         points = result.points.copy()
         points[~problem.fixed] = np.clip(points[~problem.fixed], lower, upper)
         intervals = np.maximum(result.intervals, problem.min_interval)
+        points = problem.settled(points, intervals, result.speeds)
         if not (np.all(np.isfinite(points)) and np.all(np.isfinite(intervals))):
             message = f'solver failed: {result.message}'
             break
@@ -122,9 +123,10 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
                        f'{intervals.sum():.4g} s)')
             break
         if give_up_above is not None and result.converged and \
-                intervals.sum() > (1.0 + timing.give_up_margin) * give_up_above:
+                problem.total_of(points, intervals) > \
+                (1.0 + timing.give_up_margin) * give_up_above:
             logger.debug('shape round %d: T = %.4f s cannot beat %.4f s', rounds,
-                         intervals.sum(), give_up_above)
+                         problem.total_of(points, intervals), give_up_above)
             return None
         with timed('optimise.limits'):
             limits = TimingProblem(points, cell.robot, timing)
@@ -132,7 +134,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             rescale = limits.scale_factor(intervals, ratio.max())
             scaled = rescale * intervals
             reference = problem.start if best is None else best
-            if scaled.sum() >= reference.duration:
+            if problem.total_of(points, scaled) >= problem.total(reference):
                 # Scaled, it cannot be kept: not checked every millisecond as a curve that
                 # may be kept is, which costs time in proportion to its length (an answer
                 # stopped mid-solve, far over the limits, scaled to 4,825 s: 2.4 s).
@@ -157,7 +159,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             current = curve  # feasible everywhere: the next solve starts there
             # Kept only if faster than the best so far, or than the start when it is not
             # proven (a failed solve can end on a far slower curve that is still proven).
-            if curve.duration < (problem.start if best is None else best).duration:
+            if problem.total(curve) < problem.total(problem.start if best is None else best):
                 best = curve
             if first_proven or rescale <= 1.0 + timing.rescale_tolerance:
                 break
@@ -206,26 +208,15 @@ def _clearance_samples(problem: ShapeProblem, span, fraction, every_body: bool =
     near = start < problem.settings.watch
     if every_body:
         near[:, :model.bodies] = True
-    outside = _outside_ports(start, model.bodies)
     if curve is not None:
         on_curve = problem.clearances(curve, span, fraction)
         near |= on_curve < problem.settings.watch
-        outside &= _outside_ports(on_curve, model.bodies)
-    if problem.settings.one_margin_outside:
-        near[:, model.bodies:] &= ~np.repeat(outside, len(MARGINS), axis=1) | \
-            (np.arange(near.shape[1] - model.bodies) % len(MARGINS) == 0)
     k, body = np.nonzero(near)
     wanted = np.concatenate([np.full(model.bodies, problem.settings.clearance),
                              problem.settings.port_kept * model.tolerances])[body]
     start = start[k, body]
     kept = np.where(start > 0.0, np.minimum(wanted, 0.5 * start), wanted)
     return span[k], fraction[k], body, kept
-
-
-def _outside_ports(clearances: np.ndarray, bodies: int) -> np.ndarray:
-    """Return (K, P): at each sample, whether the four margins of each port are one value."""
-    margins = clearances[:, bodies:].reshape(len(clearances), -1, len(MARGINS))
-    return np.all(margins == margins[:, :, :1], axis=2)
 
 
 def _at_times(curve: CubicBSpline, times) -> tuple:
@@ -247,6 +238,8 @@ class _Solved:
     message: str
     converged: bool
     """The solver stopped at an optimum (not at its iteration limit or a failure)."""
+    speeds: tuple = ()
+    """Each free end's (v, a) (``shape_problem.FreeEnd``)."""
 
 
 def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
@@ -264,7 +257,6 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     """
     single_blas_thread()
     scale = start.intervals.copy()
-    free = ~problem.fixed
     x0 = problem.pack(start.control_points, start.intervals, scale)
     # A row's norm at the start and at a point nearby: zero at both, it does not depend on
     # the variables at all (a velocity control point between two fixed points); zero at
@@ -273,8 +265,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     norms = []
     for x in (x0, nearby):
         with timed('optimise.rows'):
-            values, jacobian = problem.solver_rows(*problem.unpack(x, scale), wafer,
-                                                   clearance, scale)
+            values, jacobian = problem.rows(x, wafer, clearance, scale)
         norms.append(np.linalg.norm(jacobian, axis=1))
         if x is x0:
             first = (values, jacobian)
@@ -284,15 +275,11 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
 
     def linearised(x):
         with timed('optimise.rows'):
-            values, jacobian = problem.solver_rows(*problem.unpack(x, scale), wafer,
-                                                   clearance, scale)
+            values, jacobian = problem.rows(x, wafer, clearance, scale)
             return values[keep] * weights, jacobian[keep] * weights[:, None]
 
-    lower, upper = _inner_limits(problem.robot)
-    moving = int(free.sum())
-    lb = np.concatenate([np.tile(lower, moving), problem.min_interval / scale])
-    ub = np.concatenate([np.tile(upper, moving), np.full(problem.spans, np.inf)])
-    objective = np.concatenate([np.zeros(3 * moving), scale])
+    lb, ub = problem.bounds(*_inner_limits(problem.robot), scale)
+    objective = problem.objective(scale)
     result = sqp.solve(linearised, objective, x0, lb, ub,
                        max_iterations=problem.settings.max_iterations,
                        acc=problem.settings.ftol if deadline is None else
@@ -302,4 +289,5 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
                        (lambda: time.monotonic() >= deadline),
                        qp_iterations=problem.settings.qp_iterations)
     points, intervals = problem.unpack(result.x, scale)
-    return _Solved(points, intervals, result.iterations, result.message, result.converged)
+    return _Solved(points, intervals, result.iterations, result.message, result.converged,
+                   tuple(problem.speeds_of(result.x)))

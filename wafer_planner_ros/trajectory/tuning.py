@@ -61,41 +61,8 @@ class ShapeSettings:
     given up), the two stages took 17 s in all where one stage from the corridor curve
     took 73 s, for the same fastest curve per pair within rounding (cycle time ratio:
     median 1.000, worst 1.003)."""
-    port_coarse_spans: int = 32
-    """Spans of the coarse stage for a curve into or out of a port (``through_ports``): its
-    straight channels need more spans than the corridor's coarse stage has. On the default
-    cell's four loaded port-to-port pairs 32 spans gave 1.02, 1.86, 1.02 and 1.20 x the
-    optimal-control cycle time; 16 spans proved no curve on loadport1 -> loadlock1 (2.77 x,
-    the corridor curve), 24 took twice as long in the fine stage."""
-    port_max_rounds: int = 14
-    """``max_rounds`` for a curve into or out of a port (``through_ports``): each round
-    of its coarse stage tends to break a port's tolerance somewhere else. Loaded, port to
-    port, on the default cell and both test cells (14 pairs, roadmap seed 0), 14 rounds in
-    place of 6 took loadport1 -> loadlock2 of the default cell from 1.86 x to 1.57 x the
-    optimal-control cycle time, and five pairs of the test cells from 1.2-2.1 x the
-    stop-and-go sequence to 0.65-0.93 x (no pair slower)."""
     qp_iterations: int = QP_ITERATIONS
     """daqp iterations per subproblem at most (``sqp``)."""
-    port_qp_iterations: int = 1500
-    """``qp_iterations`` for the coarse stage of a curve into or out of a port
-    (``through_ports``; the fine stage keeps ``qp_iterations`` once the coarse one has proven
-    a curve). Its subproblems (32 spans, the port margins) often need more than 400 active-set
-    iterations: stopped there, a solve ends at its first relaxed step. On the default cell's
-    loaded port-to-port moves, 400 gave 1.021, 1.572, 1.018 and 1.199 x the optimal-control
-    cycle time (loadport1 -> loadlock1, -> loadlock2, loadport2 -> loadlock1, loadport3 ->
-    loadlock2; planned in 12-69 s); 1500 gives loadport1 -> loadlock2 1.012 x, planned in
-    532 s (the QP 93 % of it; 1.002 x in 584 s with 1500 in the fine stage too, 1.005 x for
-    loadport1 -> loadlock1 in 71 s where the fine stage at 400 leaves 1.021 x in 9 s)."""
-    one_margin_outside: bool = False
-    """Where the wafer is outside a port, constrain one of its four margins, not all: they
-    are then one value (how far outside) with one gradient, and the same row four times
-    leaves the QP degenerate (its active set cycled to the iteration limit). Set for
-    curves into or out of a port (``through_ports``): on the default cell's loaded
-    port-to-port moves loadport3 -> loadlock2 went from 1.87 x to 1.20 x the
-    optimal-control cycle time. Off otherwise: on the station pairs it changed one
-    elbow-branch combination (loadport3 -> loadlock1, left -> right: its coarse stage
-    proved nothing and its curve came out 1.3 % slower), where a row kept for all four
-    is one the next solve needs once the wafer enters the port."""
     coarse_give_up: float = 1.15
     """A coarse optimum this many times the best cycle time so far gives the combination up
     (``give_up_above``, plus ``TimingSettings.give_up_margin``: 1.173 x, after a converged
