@@ -44,9 +44,11 @@ from wafer_planner_ros.trajectory.verify import Verification, verify
 logger = logging.getLogger(__name__)
 
 STAGES = ('connect', 'search', 'corridor', 'spline', 'optimise', 'verify', 'stopping')
-"""The stages of a plan, timed in its ``timings_ms`` (with ``PARTS`` of them and ``total``);
-``stopping``: the stop-and-go chain of a move through a port, its legs planned, joined and
-verified (``Planner._stopping``)."""
+"""The stages of a plan, timed in its ``timings_ms`` (with ``PARTS`` of them and ``total``).
+Of a move through a port: ``corridor`` its ways through the ports (their bounds and free
+ends), ``stopping`` its transfer planned at rest between the port mouths (``Planner._leg``),
+``optimise`` the transfer blended into the ways (``CurveMethod.blend``), ``verify`` the
+moves checked whole."""
 
 KNOWN_LISTED = 10
 """The stations an UNKNOWN_STATION message lists (then how many more there are)."""
@@ -486,10 +488,14 @@ class Planner:
                                               for way in ways],
                         None if best is None else best.cycle_time, until, deadline)
                 clock.lap('optimise')
-                if shaped is not None:
-                    moves.insert(0, (compose(shaped.trajectory, *ways),
-                                     dict(transfer.metrics, **shaped.metrics),
-                                     transfer.warnings + shaped.warnings))
+                try:
+                    if shaped is not None:
+                        moves.insert(0, (compose(shaped.trajectory, *ways),
+                                         dict(transfer.metrics, **shaped.metrics),
+                                         transfer.warnings + shaped.warnings))
+                except ValueError as exc:  # a mouth state no way through its port meets
+                    logger.warning('the move %s -> %s, blended, is left: %s', a.label,
+                                   b.label, exc)
             for move, metrics, warnings in moves:
                 if best is not None and move.duration >= best.cycle_time:
                     continue

@@ -29,6 +29,10 @@ from wafer_planner_ros.trajectory.shape_problem import FreeEnd
 
 SPEEDS = 25
 """Shares of the reach at which a channel's time is computed for ``free_end``."""
+REACH_SHARE = 0.995
+"""The share of a way's reach the transfer's optimiser may ask for (``free_end``)."""
+LEAST_REACH = 1e-9
+"""m/s: a reach taken as at least this (a way that cannot move on at all)."""
 ACCELERATIONS = 13
 """Mouth accelerations at which a channel's time and reach are computed for ``free_end``."""
 JOIN_TOLERANCE = 1e-6
@@ -311,8 +315,9 @@ def free_end(channel: Channel, bounds: Bounds) -> FreeEnd:
     The transfer leaves (reaches) the mouth along the channel's line continued: its
     velocity there g1 v and acceleration g2 v^2 + g1 a (the channel's derivatives by the
     distance at the mouth), a up to the channel's acceleration bound in braking, v up to
-    what the channel reaches with it (``Bounds.reach``). ``time(v, a)`` is how long the
-    channel's own profile takes to arrive so (``timing.profile``): interpolated, as are
+    ``REACH_SHARE`` of what the channel reaches with it (``Bounds.reach``). ``time(v, a)``
+    is how long the channel's own profile takes to arrive so (``timing.profile``):
+    interpolated, as are
     the reaches, over a grid of ``ACCELERATIONS`` accelerations and ``SPEEDS`` shares of
     the reach (smooth: the optimiser's model; each move is timed exactly, ``compose``).
     """
@@ -322,7 +327,9 @@ def free_end(channel: Channel, bounds: Bounds) -> FreeEnd:
     _, g1, g2, _ = (d[0] for d in channel.derivatives([channel.length]))
     length, braking = channel.length, bounds.acceleration
     accelerations = np.linspace(-braking, 0.0, ACCELERATIONS)
-    reaches = np.array([bounds.reach(length, a) for a in accelerations])
+    # The optimiser's reach a little short of the true one, so that interpolation never
+    # lets it ask for a mouth state the way cannot meet (``compose``).
+    reaches = REACH_SHARE * np.array([bounds.reach(length, a) for a in accelerations])
     shares = np.linspace(0.0, 1.0, SPEEDS)
     times = np.array([[bounds.time(length, share * reach, a) for share in shares]
                       for a, reach in zip(accelerations, reaches)], dtype=float)
@@ -333,11 +340,12 @@ def free_end(channel: Channel, bounds: Bounds) -> FreeEnd:
     table = RectBivariateSpline(accelerations, shares, times, kx=3, ky=3)
 
     def time(v, a):
-        return float(table(a, v / reach(a))[0, 0])
+        return float(table(a, v / max(float(reach(a)), LEAST_REACH))[0, 0])
 
     def time_slopes(v, a):
-        r = float(reach(a))
-        by_a, by_share = float(table(a, v / r, dx=1)[0, 0]), float(table(a, v / r, dy=1)[0, 0])
+        r = max(float(reach(a)), LEAST_REACH)
+        by_a = float(table(a, v / r, dx=1)[0, 0])
+        by_share = float(table(a, v / r, dy=1)[0, 0])
         return by_share / r, by_a - by_share * v * float(reach_slope(a)) / (r * r)
 
     return FreeEnd(g1, g2, braking, time, time_slopes, lambda a: float(reach(a)),
