@@ -23,8 +23,8 @@ from wafer_planner_ros.geometry.ports import inverse_on_branch
 from wafer_planner_ros.moves.timing import Bounds, profile
 
 GRID = 257
-"""Points along a channel at which its derivatives' largest values are taken
-(``Channel.largest``: what the channel's speed, acceleration and jerk bounds use)."""
+"""Points along a channel at which its derivatives are taken: where its mouth is found
+(``Channel.out_of``) and the limits are kept (``channel_bounds``)."""
 CONSISTENT = 1e-9
 """rad: how near a channel's end configurations must be to the line's inverse kinematics."""
 ROUNDING = 1e-9
@@ -107,11 +107,6 @@ class Channel:
         g2 = solve(-arm.wafer_acceleration(q, g1, zero))
         g3 = solve(-arm.wafer_jerk(q, g1, g2, zero))
         return q, g1, g2, g3
-
-    def largest(self) -> np.ndarray:
-        """Return (3, 3): the largest |d^k q_i / dsigma^k| (k = 1, 2, 3) along the channel."""
-        _, *orders = self.derivatives(np.linspace(0.0, self.length, GRID))
-        return np.array([np.abs(g).max(axis=0) for g in orders])
 
     def speed_bound(self, a, b) -> np.ndarray:
         """
