@@ -57,6 +57,9 @@ MAX_QUOTED = 200
 LEGS_KEPT = 64
 """The stop-and-go legs a planner keeps (``Planner._leg``): every retract and extend of 16
 stations with ports on both elbow branches, with 32 transfers between them."""
+LEGS_SHARE = 0.75
+"""Of the time to a budgeted request's deadline, the share a move through a port may spend
+on its transfer (``_through``): the rest verifies and answers."""
 MAX_WAY_TIME = 30.0
 """s: a way through a port that takes longer from rest to rest is refused (NO_PATH)."""
 CHANNEL_CHECKS = 65
@@ -180,6 +183,7 @@ class Planner:
         self.settings = settings
         self.method = settings.method(cell, settings.timing, settings.shape)
         self._by_load = {cell.robot.load: self}
+        self._by_method = {settings.method: self}
         self._legs: dict = {}
         """The transfers between port mouths planned so far (``_leg``), at most
         ``LEGS_KEPT``."""
@@ -204,6 +208,19 @@ class Planner:
             planner._by_load = self._by_load  # one planner per limit set, shared
             self._by_load[load] = planner
         return self._by_load[load]
+
+    def with_method(self, method: Type[CurveMethod]) -> 'Planner':
+        """
+        Return the planner of this cell, roadmap and limit set with another curve method.
+
+        One per method, shared: what one plans between port mouths (``_leg``) serves the
+        moves through the ports the other plans.
+        """
+        if method not in self._by_method:
+            planner = Planner(self.cell, self.roadmap, replace(self.settings, method=method))
+            planner._by_method = self._by_method
+            self._by_method[method] = planner
+        return self._by_method[method]
 
     def endpoint(self, value, role: str) -> Endpoint:
         """
@@ -386,8 +403,11 @@ class Planner:
                     if checked is None:
                         continue
                 counts = {'candidates': len(prepared), 'given_up': len(given_up)}
-                return self._result(candidate, checked, counts, dict(
+                result = self._result(candidate, checked, counts, dict(
                     stage_ms, total=(time.perf_counter() - begun) * 1000.0))
+                if until is None:  # a transfer between port mouths, should one ask for it
+                    self.keep(result)
+                return result
             # Every faster one failed verification: finish those given up after all.
             candidates = [c for c in (self._finished(pair, bound, stage_ms, until, deadline)
                                       for pair in given_up) if c is not None]
@@ -452,11 +472,23 @@ class Planner:
                 combinations.append((fastest, i, j, ways, mouths))
         clock.lap('corridor')
         best, tried = None, 0
+        # Within a budget, the transfer (planned, unless kept from an earlier answer, and
+        # blended) may take up to LEGS_SHARE of the time to the deadline: the budget alone
+        # leaves it slower than the move stopping at the mouths unbudgeted. Once one move is
+        # verified and that time is spent, only the combinations whose transfer is kept
+        # are tried.
+        left = None if deadline is None else max(deadline - time.monotonic(), 0.0)
+        legs_until = until if until is None or left is None else \
+            max(until, time.monotonic() + LEGS_SHARE * left)
         for fastest, i, j, ways, mouths in sorted(combinations, key=lambda c: c[0]):
             _check_deadline(deadline)
             if best is not None and fastest >= best.cycle_time:
                 continue
             (elbow_a, _), (elbow_b, _) = a.configs[i], b.configs[j]
+            if best is not None and legs_until is not None and \
+                    time.monotonic() >= legs_until and not self._kept(
+                        mouths, (elbow_a, elbow_b)):
+                continue
             if np.array_equal(*mouths):
                 # Only out of a port to its mouth, or only in: the way alone.
                 result = self._answer(a, b, i, j, None, compose(None, *ways), {}, ())
@@ -472,7 +504,7 @@ class Planner:
                     for end, role, way, elbow, mouth in zip(
                         (a, b), ('start', 'goal'), ways, (elbow_a, elbow_b), mouths)]
             try:
-                transfer = self._leg(*ends, deadline, until)
+                transfer = self._leg(*ends, deadline, legs_until)
                 stop = compose(transfer.trajectory, *ways)
             except PlanningError as exc:
                 logger.debug('branches %s -> %s: no transfer: %s', elbow_a, elbow_b, exc)
@@ -486,7 +518,7 @@ class Planner:
                     shaped = self.method.blend(
                         transfer.trajectory, [None if way is None else self._free_end(way)
                                               for way in ways],
-                        None if best is None else best.cycle_time, until, deadline)
+                        None if best is None else best.cycle_time, legs_until, deadline)
                 clock.lap('optimise')
                 try:
                     if shaped is not None:
@@ -539,10 +571,7 @@ class Planner:
                     found = (f'its straight way out of the port takes {took:.1f} s at the '
                              f'{self.load} limits (over {MAX_WAY_TIME:g} s: the arm is nearly '
                              'folded or stretched along it)')
-            with self._legs_lock:
-                if len(self._bounds) >= LEGS_KEPT:
-                    del self._bounds[next(iter(self._bounds))]
-                self._bounds[key] = found
+            self._keep(self._bounds, key, found)
         if isinstance(found, str):
             raise PlanningError(ErrorCode.NO_PATH, f'{end.label}: {found}')
         return channel, found
@@ -555,10 +584,7 @@ class Planner:
             end = self._ends.get(key)
         if end is None:
             end = free_end(channel, bounds)
-            with self._legs_lock:
-                if len(self._ends) >= LEGS_KEPT:
-                    del self._ends[next(iter(self._ends))]
-                self._ends[key] = end
+            self._keep(self._ends, key, end)
         return end
 
     def _leg(self, start: Endpoint, goal: Endpoint, deadline: Optional[float],
@@ -567,20 +593,39 @@ class Planner:
         Return the move from ``start`` to ``goal``, each of one configuration, planned once.
 
         A transfer between two port mouths serves every move through those ports: the last
-        ``LEGS_KEPT`` planned without a budget are kept, by their ends' configurations. One
-        planned within a budget (``until``) is not kept, unless none was planned without.
+        ``LEGS_KEPT`` answers this planner gave without a budget are kept, by their ends'
+        configurations and branches (``_planned``; the station table's station pairs are
+        such answers). One planned within a budget (``until``) is not kept.
         """
-        key = tuple((end.configs[0][0], end.configs[0][1].tobytes()) for end in (start, goal))
+        key = _leg_key(start.configs[0][1], goal.configs[0][1],
+                       (start.configs[0][0], goal.configs[0][0]))
         with self._legs_lock:
             leg = self._legs.get(key)
         if leg is None:
             leg = self._planned(start, goal, deadline, until, time.perf_counter())
-            if until is None:
-                with self._legs_lock:
-                    if len(self._legs) >= LEGS_KEPT:
-                        del self._legs[next(iter(self._legs))]
-                    self._legs[key] = leg
         return leg
+
+    def keep(self, result: PlanResult) -> None:
+        """
+        Keep a verified answer planned without a budget as a transfer between its ends.
+
+        A move through a port whose mouths are its ends, on its branches, takes it as its
+        transfer (``_leg``) instead of planning one.
+        """
+        self._keep(self._legs, _leg_key(result.start_q, result.goal_q, result.branches),
+                   result)
+
+    def _kept(self, mouths, branches) -> bool:
+        """Return whether the transfer between two mouths on their branches is kept."""
+        with self._legs_lock:
+            return _leg_key(*mouths, branches) in self._legs
+
+    def _keep(self, kept: dict, key, value) -> None:
+        """Keep ``value`` in one of this planner's caches, the oldest out beyond LEGS_KEPT."""
+        with self._legs_lock:
+            if key not in kept and len(kept) >= LEGS_KEPT:
+                del kept[next(iter(kept))]
+            kept[key] = value
 
     def _answer(self, a: Endpoint, b: Endpoint, i: int, j: int,
                 transfer: Optional[PlanResult], move: PortMove, metrics: Mapping,
@@ -799,6 +844,11 @@ def _only_branch(end: Endpoint, elbow, role: str) -> Endpoint:
                             f'{[c[0] for c in end.configs]})')
     return replace(end, configs=configs,
                    channels=tuple(end.channels[k] for k in kept) if end.channels else ())
+
+
+def _leg_key(qa: np.ndarray, qb: np.ndarray, branches) -> tuple:
+    """Return the key of a move between two configurations on their branches (``_leg``)."""
+    return tuple((branch, q.tobytes()) for branch, q in zip(branches, (qa, qb)))
 
 
 def _mouth_label(end: Endpoint, role: str) -> str:

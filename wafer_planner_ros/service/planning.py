@@ -32,6 +32,7 @@ import time
 from typing import Dict, Mapping, Optional, Type
 
 from wafer_planner_ros.cell.limits import LOADED
+from wafer_planner_ros.cell.stations import INSIDE
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.service.table import StationTable
 from wafer_planner_ros.trajectory.methods import CurveMethod, KnotTiming, WholeCurve
@@ -116,9 +117,29 @@ class PlanningService:
         if budget < MIN_BUDGET:
             return _with_method(self.planner, KnotTiming).plan(start, goal, deadline=deadline,
                                                                load=load)
+        self._lend_transfer(start, goal, load)
         result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget,
                                                 load=load)
         return replace(result, metrics=dict(result.metrics, budget=budget))
+
+    def _lend_transfer(self, start, goal, load: str) -> None:
+        """
+        Give the whole-curve planner the table's move between the stations of a port move.
+
+        A move from inside a port to inside another is planned as its ways through the
+        ports and a transfer between the port mouths, the stations' retracted poses: when
+        the table of ``load`` holds that station pair, its verified answer is that transfer
+        (``Planner.keep``), where the budget alone would make a slower one.
+        """
+        if not (isinstance(start, str) and isinstance(goal, str)) or not (
+                start.endswith(INSIDE) or goal.endswith(INSIDE)):
+            return
+        pair = tuple(name[:-len(INSIDE)] if name.endswith(INSIDE) else name
+                     for name in (start, goal))
+        table = self._holding(*pair, load)
+        if table is not None:
+            planner = whole_curve(self.planner).for_load(load)
+            planner.keep(table.answer(planner, *pair))
 
 
 def whole_curve(planner: Planner) -> Planner:
@@ -127,9 +148,7 @@ def whole_curve(planner: Planner) -> Planner:
 
 
 def _with_method(planner: Planner, method: Type[CurveMethod]) -> Planner:
-    if planner.settings.method is method:
-        return planner
-    return Planner(planner.cell, planner.roadmap, replace(planner.settings, method=method))
+    return planner.with_method(method)
 
 
 def within_budget(station_request: bool, values: Mapping, budget_parameter) -> bool:
