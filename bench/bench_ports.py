@@ -8,16 +8,16 @@ roadmap seed 0 (the node's default), planned by the whole-curve optimiser as a
 
 - non-stop: ``<loadport>:inside`` -> ``<loadlock>:inside`` loaded, then back empty on the
   same elbow branches;
-- stop-and-go: each way a retract, a transfer and an extend, each from rest to rest and
-  loaded, on one elbow branch per station (the fastest such chain);
+- stop-and-go: each way the move that stops at both port mouths (``Planner.stop_and_go``),
+  loaded, out on its fastest elbow branches and back on those;
 - the corridor curve of the non-stop move out (knot timing alone: it stops at both port
   mouths).
 
 Each answer is verified by the planner (every limit of its set and the port tolerances
 every millisecond, the collision proof). Reported per pair: the cycle times, each non-stop
 move's planning time (s), the way out against its own stop-and-go chain
-(``Planner.stop_and_go``: the same move stopping at both port mouths) and against its three
-stop-and-go moves, its time along the channels and on the transfer (shares of its cycle
+(``Planner.stop_and_go``: the same move stopping at both port mouths, the cycle's
+stop-and-go way out), its time along the channels and on the transfer (shares of its cycle
 time), the cycle against the stop-and-go cycle, and on the default cell the way out
 against the optimal-control figure of the same move (direct collocation with IPOPT, every
 joint and wafer limit including jerk, the port model of the cell file: within its
@@ -84,18 +84,15 @@ def pair_row(planner, corridor, loadport, loadlock) -> dict:
     row['planning_s'] = [seconds[(m.start, m.goal, m.load, None if m.branches == (None, None)
                                   else m.branches)] for m in cycle.moves]
     row['non_stop'] = out.cycle_time
-    if out.result is not None:
-        own = planner.stop_and_go(out.start, out.goal, load=out.load).cycle_time
+    chain = cycle.stop_and_go_moves
+    if out.result is not None and chain:
+        own = chain[0].cycle_time
         row['own_stop_and_go'], row['over_own_stop_and_go'] = own, out.cycle_time / own
         row['in_port_share'] = out.result.metrics['in_port_time'] / out.cycle_time
         row['transfer_share'] = out.result.metrics['transfer_time'] / out.cycle_time
         row['mouth_speeds'] = [out.result.metrics['start_mouth_speed'],
                                out.result.metrics['goal_mouth_speed']]
     row['corridor_curve'] = _timed(corridor, out.start, out.goal)[0]
-    chain = cycle.stop_and_go_moves
-    row['stop_and_go_out'] = sum(m.cycle_time for m in chain[:3]) if chain else None
-    if out.cycle_time is not None and row['stop_and_go_out'] is not None:
-        row['non_stop_over_stop_and_go'] = out.cycle_time / row['stop_and_go_out']
     if cycle.cycle is not None and cycle.stop_and_go is not None:
         row['cycle_over_stop_and_go'] = cycle.cycle / cycle.stop_and_go
     optimal = OPTIMAL.get((loadport, loadlock)) if planner.cell.name == DEFAULT_CELL \
@@ -144,9 +141,8 @@ def main(argv=None) -> int:
             errors = [m['error'] for m in row['moves'] if m['error']]
             print(f"{cell.name} {loadport} <-> {loadlock}: non-stop out {row['non_stop']} s "
                   f"(x {row.get('over_optimal_control', float('nan')):.3f} of the limit, "
-                  f"x {row.get('non_stop_over_stop_and_go', float('nan')):.3f} of "
-                  f"stop-and-go, x {row.get('over_own_stop_and_go', float('nan')):.3f} of its "
-                  f"own) in {row['planning_s'][0]:.2f} s (before: {row['before_non_stop']} s "
+                  f"x {row.get('over_own_stop_and_go', float('nan')):.3f} of its own "
+                  f"stop-and-go) in {row['planning_s'][0]:.2f} s (before: {row['before_non_stop']} s "
                   f"in {row['before_planning_s']} s); cycle {row['cycle']} s "
                   f"against stop-and-go {row['stop_and_go']} s "
                   f"(x {row.get('cycle_over_stop_and_go', float('nan')):.3f})"
@@ -159,7 +155,6 @@ def main(argv=None) -> int:
         report = {
             'cell': cell.name, 'pairs': rows,
             'median_over_optimal_control': median('over_optimal_control'),
-            'median_non_stop_over_stop_and_go': median('non_stop_over_stop_and_go'),
             'median_over_own_stop_and_go': median('over_own_stop_and_go'),
             'median_cycle_over_stop_and_go': median('cycle_over_stop_and_go'),
             'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows])),

@@ -17,6 +17,7 @@ from study_tasks import flaky
 from wafer_planner_ros.cell.document import read_cell_file, read_cell_yaml
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.study import parameters
+from wafer_planner_ros.study.evaluate import evaluate
 from wafer_planner_ros.study.executors import LocalExecutor
 from wafer_planner_ros.study.results import read_rows, Results, ResultsError, without_cost
 from wafer_planner_ros.study.runner import run_variants
@@ -37,6 +38,7 @@ def small_study(tmp_path: Path) -> Path:
     path.write_text(yaml.safe_dump({'study': {
         'name': 'small', 'base': str(CELLS / 'two_stations.yaml'),
         'roadmap': {'nodes': 300, 'seed': 0},
+        'method': 'knot-timing',  # milliseconds a move: what is checked is the bookkeeping
         'grid': {'robot.link_lengths[0]': [0.35, 0.37], 'boundary.width': [1.6, 1.8]},
         'list': [{'robot.link_lengths[0]': 0.30}],  # loadport2 out of reach: invalid
     }}))
@@ -138,6 +140,22 @@ def test_the_variants_are_the_base_the_grid_the_list_and_seeded_samples_each_cel
 def test_the_example_study_reads():
     study = Study.from_file(EXAMPLE)
     assert len(study.variants()) == 6
+    assert study.method == 'whole-curve'
+
+
+def test_a_variant_runs_the_motion_the_node_runs_by_default():
+    # The default method is the node's: its moves through the ports do not stop at the
+    # mouths, and the stop-and-go cycle they are compared with does, at both, each way.
+    study = Study.from_dict({'study': {'base': str(CELLS / 'two_stations.yaml'),
+                                       'roadmap': {'nodes': 300, 'seed': 0}}})
+    assert study.method == 'whole-curve'
+    variant = study.variants()[0]
+    row = evaluate(variant.key, variant.index, variant.values, variant.document,
+                   study.nodes, study.seed, study.method)
+    assert row['status'] == 'planned', row['reason']
+    (swap,) = row['swaps']
+    assert swap['cycle'] < swap['stop_and_go']
+    assert row['swap_cycle'] == swap['cycle']
 
 
 # ----------------------------------------------------------------- the results directory

@@ -336,11 +336,15 @@ class Planner:
             return self.for_load(load).plan(start, goal, deadline, branches, budget)
         begun = time.perf_counter()
         until = None if budget is None else time.monotonic() + budget
+        return self._planned(*self._ends_of(start, goal, branches), deadline, until, begun)
+
+    def _ends_of(self, start, goal, branches) -> Tuple[Endpoint, Endpoint]:
+        """Return the resolved ends of a request, each on its branch of ``branches`` if given."""
         a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
-        if branches is not None:
-            a, b = (_only_branch(end, elbow, role) for end, elbow, role in
-                    ((a, branches[0], 'start'), (b, branches[1], 'goal')))
-        return self._planned(a, b, deadline, until, begun)
+        if branches is None:
+            return a, b
+        return tuple(_only_branch(end, elbow, role) for end, elbow, role in
+                     ((a, branches[0], 'start'), (b, branches[1], 'goal')))
 
     def _planned(self, a: Endpoint, b: Endpoint, deadline: Optional[float],
                  until: Optional[float], begun: float) -> PlanResult:
@@ -415,19 +419,22 @@ class Planner:
         raise failure
 
     def stop_and_go(self, start, goal, deadline: Optional[float] = None,
-                    load: Optional[str] = None) -> PlanResult:
+                    load: Optional[str] = None,
+                    branches: Optional[Tuple[Optional[int], Optional[int]]] = None
+                    ) -> PlanResult:
         """
         Return the move through a port that stops at each port mouth, verified (``_through``).
 
         The same move as ``plan`` without blending the ways through the ports into the
         transfer: straight out of the start's port to rest at its mouth, the transfer from
-        rest to rest, straight into the goal's port. Raises PlanningError: INVALID_REQUEST
-        when neither end is inside a port, else the first reason none could be planned.
+        rest to rest, straight into the goal's port. ``load`` and ``branches`` as for
+        ``plan``. Raises PlanningError: INVALID_REQUEST when neither end is inside a port,
+        else the first reason none could be planned.
         """
         if load is not None and load != self.load:
-            return self.for_load(load).stop_and_go(start, goal, deadline)
+            return self.for_load(load).stop_and_go(start, goal, deadline, branches=branches)
         begun = time.perf_counter()
-        a, b = self.endpoint(start, 'start'), self.endpoint(goal, 'goal')
+        a, b = self._ends_of(start, goal, branches)
         if not (a.channels or b.channels):
             raise PlanningError(ErrorCode.INVALID_REQUEST,
                                 f'{a.label} -> {b.label} does not stop on its way: neither '

@@ -12,10 +12,10 @@ the way back as planned and passes the empty set's verification, it is the way b
 does).
 
 It is compared with the same cycle as a controller without non-stop moves or an empty
-limit set makes it: each way a retract (``<station>:inside`` -> ``<station>``), a transfer
-between the retracted poses and an extend (``<station>`` -> ``<station>:inside``), each
-from rest to rest and loaded, on one elbow branch per station (the retract ends where the
-transfer starts): the fastest such chain of the six moves.
+limit set makes it: each way the move that stops at both port mouths
+(``Planner.stop_and_go``: straight out of the port to rest at its mouth, the transfer from
+rest to rest, straight in), loaded; the way out on its fastest elbow branches, the way back
+on those it ended and started on.
 
 Both are reported in seconds of motion per wafer, with wafers per hour of motion
 (3600 / seconds: the robot's motion alone, without the stations' own times) and the gain
@@ -23,7 +23,6 @@ Both are reported in seconds of motion per wafer, with wafers per hour of motion
 """
 
 from dataclasses import dataclass, replace
-import itertools
 from typing import Callable, Optional, Tuple
 
 from wafer_planner_ros.cell.limits import EMPTY, LOADED
@@ -70,9 +69,9 @@ class SwapCycle:
     moves: Tuple[Move, ...]
     """Non-stop: loaded out, empty back (the way back absent when the way out failed)."""
     stop_and_go_moves: Tuple[Move, ...]
-    """The fastest chain of six (empty when no chain could be planned in full)."""
+    """Stopping at the mouths: out and back (empty when either could not be planned)."""
     stop_and_go_errors: Tuple[str, ...] = ()
-    """Why each chain that failed did (elbow branches, then the move's error)."""
+    """Why the move that failed did (its ends, then its error)."""
 
     @property
     def cycle(self) -> Optional[float]:
@@ -82,7 +81,7 @@ class SwapCycle:
     @property
     def stop_and_go(self) -> Optional[float]:
         """Return the stop-and-go cycle's seconds of motion per wafer (None: none planned)."""
-        return _total(self.stop_and_go_moves, 6)
+        return _total(self.stop_and_go_moves, 2)
 
     @property
     def gain(self) -> Optional[float]:
@@ -118,21 +117,15 @@ def swap_cycle(planner: Planner, loadport: str, loadlock: str,
     if out.result is not None:
         start, goal = out.result.branches
         moves += (_faster(planner, _move(plan, ll, lp, EMPTY, (goal, start)), out),)
-    best, errors = (), []
-    for ea, eb in itertools.product(_branches(planner, loadport),
-                                    _branches(planner, loadlock)):
-        chain = []
-        for start, goal, branches in ((lp, loadport, (ea, ea)), (loadport, loadlock, (ea, eb)),
-                                      (loadlock, ll, (eb, eb)), (ll, loadlock, (eb, eb)),
-                                      (loadlock, loadport, (eb, ea)), (loadport, lp, (ea, ea))):
-            chain.append(_move(plan, start, goal, LOADED, branches))
-            if chain[-1].result is None:
-                errors.append(f'elbow {ea} -> {eb}: {start} -> {goal}: {chain[-1].error}')
-                break
-        else:
-            if not best or _total(chain, 6) < _total(best, 6):
-                best = tuple(chain)
-    return SwapCycle(loadport, loadlock, moves, best, tuple(errors))
+    def stop(start, goal, branches, load):
+        return planner.stop_and_go(start, goal, load=load, branches=branches)
+
+    chain = [_move(stop, lp, ll, LOADED, (None, None))]
+    if chain[0].result is not None:
+        start, goal = chain[0].result.branches
+        chain.append(_move(stop, ll, lp, LOADED, (goal, start)))
+    errors = tuple(f'{m.start} -> {m.goal}: {m.error}' for m in chain if m.result is None)
+    return SwapCycle(loadport, loadlock, moves, () if errors else tuple(chain), errors)
 
 
 def loadport_loadlock_pairs(cell) -> list:
@@ -140,11 +133,6 @@ def loadport_loadlock_pairs(cell) -> list:
     names = sorted(name for name, station in cell.stations.items() if station.port)
     return [(a, b) for a in names for b in names
             if a.startswith('loadport') and b.startswith('loadlock')]
-
-
-def _branches(planner: Planner, station: str) -> list:
-    """Return the elbow branches that reach inside ``station``'s port (None: joints)."""
-    return [elbow for elbow, _ in planner.endpoint(f'{station}{INSIDE}', 'start').configs]
 
 
 def _faster(planner: Planner, back: Move, out: Move) -> Move:

@@ -7,7 +7,7 @@ The study file: a base cell and what varies.
       name: example                  # optional (default: the file's name)
       base: efem_default.yaml        # the cell varied, relative to this file
       roadmap: {nodes: 600, seed: 0} # each variant's roadmap (default: 1500 nodes, seed 0)
-      method: knot-timing            # or whole-curve (``wafer-plan --method``)
+      method: whole-curve            # or knot-timing (``wafer-plan --method``)
       grid:                          # every combination of these values
         robot.link_lengths[0]: [0.34, 0.36]
         boundary.width: [1.6, 1.7]
@@ -36,9 +36,12 @@ from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.errors import CellError
 from wafer_planner_ros.roadmap.graph import check_seed, RoadmapSettings
 from wafer_planner_ros.study import parameters
-from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS
+from wafer_planner_ros.trajectory.methods import METHODS, WholeCurve
 
 KEYS = ('name', 'base', 'roadmap', 'method', 'grid', 'list', 'random', 'ranges')
+DEFAULT_METHOD = WholeCurve.name
+"""How each variant's motions are made unless the study says: the node's (its station
+table and its moves through the ports, non-stop)."""
 MAX_VARIANTS = 1_000_000
 """Most variants a study file may describe (a grid multiplies quickly)."""
 
@@ -111,7 +114,7 @@ class Study:
             check_seed(seed)
         except ValueError as exc:
             raise StudyError(f'study.roadmap.seed: {exc}') from None
-        method = study.get('method', KnotTiming.name)
+        method = study.get('method', DEFAULT_METHOD)
         if method not in METHODS:
             raise StudyError(f'study.method: {method!r} is not one of '
                              f'{", ".join(sorted(METHODS))}')
