@@ -27,6 +27,7 @@ from wafer_planner_ros.service.table import lacking, port_pairs, save_table
 from wafer_planner_ros.service.table import table_key
 from wafer_planner_ros.service.table import table_pairs, table_path, TableError
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.verify import verify
 
 _Request = namedtuple('_Request', 'start goal')
@@ -148,6 +149,23 @@ def test_a_request_is_answered_from_the_table_or_within_the_budget(planner, buil
     whole = PlanningService(whole_curve(planner)).answer(*angles, deadline)
     assert whole.metrics['method'] == 'whole-curve' and 'budget' not in whole.metrics
     assert budgeted.cycle_time <= corridor.cycle_time
+
+
+def test_a_port_move_within_the_budget_blends_and_beats_stopping_at_the_mouths(
+        default_cell, default_roadmap):
+    # A first start: no table yet. Within the packaged budget the move through the ports is
+    # still the blended one (its transfer planned in up to 3/4 of the time to the deadline:
+    # the budget alone made it slower than stopping), faster than the move that stops.
+    budget = settings_from({}).optimise_budget
+    start, goal = 'loadport1:inside', 'loadlock2:inside'
+    service = PlanningService(Planner(default_cell, default_roadmap), budget=budget)
+    answer = service.answer(start, goal, time.monotonic() + 20.0)
+    assert answer.metrics['method'] == 'whole-curve' and answer.metrics['budget'] == budget
+    assert answer.verification.ok and answer.metrics['stops'] == 0
+    stopping = Planner(default_cell, default_roadmap, PlannerSettings(
+        method=WholeCurve)).stop_and_go(start, goal, branches=answer.branches)
+    assert stopping.metrics['stops'] == 2
+    assert answer.cycle_time < stopping.cycle_time
 
 
 def test_the_service_answers_from_its_table_once_it_is_set(planner, built):
