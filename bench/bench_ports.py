@@ -142,8 +142,9 @@ def main(argv=None) -> int:
             print(f"{cell.name} {loadport} <-> {loadlock}: non-stop out {row['non_stop']} s "
                   f"(x {row.get('over_optimal_control', float('nan')):.3f} of the limit, "
                   f"x {row.get('over_own_stop_and_go', float('nan')):.3f} of its own "
-                  f"stop-and-go) in {row['planning_s'][0]:.2f} s (before: {row['before_non_stop']} s "
-                  f"in {row['before_planning_s']} s); cycle {row['cycle']} s "
+                  f"stop-and-go) in {row['planning_s'][0]:.2f} s "
+                  f"(before: {row['before_non_stop']} s in {row['before_planning_s']} s); "
+                  f"cycle {row['cycle']} s "
                   f"against stop-and-go {row['stop_and_go']} s "
                   f"(x {row.get('cycle_over_stop_and_go', float('nan')):.3f})"
                   + ''.join(f'; {e}' for e in errors), flush=True)

@@ -2,10 +2,13 @@
 
 import numpy as np
 import pytest
-from wafer_planner_ros.moves.channel import Channel
+from wafer_planner_ros.cell.document import read_cell_file, read_cell_yaml
+from wafer_planner_ros.cell.model import Cell, default_cell_path
+from wafer_planner_ros.moves.channel import Channel, channel_bounds
 from wafer_planner_ros.moves.through import PortMove
 from wafer_planner_ros.moves.timing import Bounds, profile
 from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.study import parameters
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.verify import verify
 
@@ -47,6 +50,38 @@ def test_the_speed_bound_holds_on_every_interval(cell):
             fine = np.linspace(edges[k], edges[k + 1], 51)
             speed = np.abs(channel.derivatives(fine)[1]).max(axis=0)
             assert np.all(speed <= bound[k]), (station, k, speed, bound[k])
+
+
+FOLDED = {'robot.link_lengths[0]': 0.3821606733715736, 'robot.link_lengths[1]': 0.3439991437295541,
+          'stations.loadlock1.x': -0.509760669819198, 'stations.loadlock2.x': 0.527322104929983}
+"""A layout a search tried: the arm 1.9 degrees from folded at loadport2's retracted pose."""
+
+
+def test_an_arm_nearly_folded_at_a_port_mouth_stops_there_in_seconds_within_every_limit():
+    document = parameters.apply(read_cell_yaml(read_cell_file(default_cell_path()), 'default'),
+                                FOLDED)
+    cell = Cell.from_dict(document)
+    channel, _ = _channel(cell, 'loadport2')
+    assert np.pi - abs(channel.mouth[1]) < np.radians(2.0)
+    bounds = channel_bounds(channel, cell.robot)
+    # Leaving at speed, the fold sets every bound on the whole way (27 s); a stop at the
+    # mouth is slow only near it (it was refused: 37.7 s, over 30 s).
+    stopping = profile(channel.length, 0.0, bounds.at(0.0, 0.0))
+    moving = profile(channel.length, 0.0, bounds)
+    assert stopping.duration < 10.0 and stopping.duration < 0.5 * moving.duration
+    # Every joint limit and the wafer's along the way, every 0.1 ms: not the bounds'
+    # argument, the motion itself.
+    t = np.append(np.arange(0.0, stopping.duration, 1e-4), stopping.duration)
+    sigma, speed, acceleration, jerk = stopping.evaluate(t).T
+    _, g1, g2, g3 = channel.derivatives(np.clip(sigma, 0.0, channel.length))
+    v, a, j = speed[:, None], acceleration[:, None], jerk[:, None]
+    limits = cell.robot.limits
+    assert np.all(np.abs(g1 * v) <= limits.velocity)
+    assert np.all(np.abs(g2 * v ** 2 + g1 * a) <= limits.acceleration)
+    assert np.all(np.abs(g3 * v ** 3 + 3.0 * g2 * v * a + g1 * j) <= limits.jerk)
+    limit = cell.robot.wafer_limit
+    assert np.all(np.abs(acceleration[:, None] * channel.direction) <= limit.xy)
+    assert limit.norm is None or np.all(np.abs(acceleration) <= limit.norm)
 
 
 def test_a_profile_starts_at_rest_and_ends_at_its_mouth_state_within_its_bounds():
@@ -109,7 +144,6 @@ def test_a_move_whose_parts_do_not_meet_is_refused(default_cell, default_roadmap
 
 def test_a_free_end_moves_the_transfer_as_its_rows_jacobian_says(default_cell, default_roadmap):
     """The whole-curve rows with free ends: their Jacobian against finite differences."""
-    from wafer_planner_ros.moves.channel import channel_bounds
     from wafer_planner_ros.moves.through import free_end
     from wafer_planner_ros.trajectory.shape_problem import ShapeProblem
     from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings

@@ -13,7 +13,7 @@ wafer acceleration and jerk with the higher term zero). ``Channel.speed_bound`` 
 collision proof of a motion along the channel rests on it.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 import numpy as np
@@ -191,6 +191,10 @@ SPEED_TRIES = 12
 """Speed bounds tried along a channel (``channel_bounds``), each ``SPEED_STEP`` times the
 one before, from the joints' velocity limits down."""
 SPEED_STEP = 0.7
+ACCELERATION_TRIES = 8
+"""Acceleration bounds tried per speed bound, each ``ACCELERATION_STEP`` times the one
+before, from the largest the limits allow down."""
+ACCELERATION_STEP = 0.5
 BISECTIONS = 40
 """Halvings of the acceleration bound's search."""
 MARGIN = 0.999
@@ -205,22 +209,26 @@ def channel_bounds(channel: Channel, robot) -> Bounds:
     Along the channel q' = g1 s', q'' = g2 s'^2 + g1 s'' and q''' = g3 s'^3 + 3 g2 s' s'' +
     g1 s''' (g_k: the k-th derivative by the distance s), and the wafer's acceleration is
     s'' along the channel's direction. A profile from rest inside the port (``timing``)
-    with |s''| <= A has s'^2 <= 2 A s at distance s, whatever else it does. So the bounds
+    with |s''| <= A has s'^2 <= 2 A s at distance s, whatever else it does; one that also
+    ends at rest at the mouth (length L) has s'^2 <= 2 A (L - s) as well. So the bounds
     (V, A, J) keep every limit at every s of a grid (each cell of the grid taken at its
-    larger |g_k| and its far end's speed): |g1| V within the velocity limit, |g2| min(V^2,
-    2 A s) + |g1| A within the acceleration limit and A within the wafer's limit along
-    the direction, |g3| s'^3 + 3 |g2| s' A + |g1| J within the jerk limit. Near a folded
-    or stretched arm the g_k grow and a lower V leaves more of the acceleration limit to
-    A: of ``SPEED_TRIES`` speeds from the velocity limit's down, the bounds whose
-    rest-to-rest profile over the channel is fastest are returned, each with the largest
-    A that leaves a positive J. Every limit is taken at ``MARGIN`` of itself. Raise
-    ValueError when none allows a motion.
+    larger |g_k| and at the fastest s' these allow in it): |g1| s' within the velocity
+    limit, |g2| s'^2 + |g1| A within the acceleration limit and A within the wafer's limit
+    along the direction, |g3| s'^3 + 3 |g2| s' A + |g1| J within the jerk limit. Near a
+    folded or stretched arm the g_k grow and a lower V leaves more of the acceleration
+    limit to A, and a lower A more of the jerk limit to J: of ``SPEED_TRIES`` speeds from
+    the velocity limit's down, each with ``ACCELERATION_TRIES`` accelerations from the
+    largest that leaves a positive J down, the bounds whose rest-to-rest profile over the
+    channel is fastest are returned. Those of a profile that stops at the mouth are found the
+    same way with both caps on s', and returned as the bounds' ``resting`` where they are
+    faster: with the arm nearly folded at the mouth, a stop there takes seconds where
+    leaving at speed would take minutes. Every limit is taken at ``MARGIN`` of itself.
+    Raise ValueError when none allows a motion.
     """
     sigma = np.linspace(0.0, channel.length, GRID)
     _, *orders = channel.derivatives(sigma)
-    # Each grid cell at its larger derivatives and its far end's distance.
+    # Each grid cell at its larger derivatives.
     g1, g2, g3 = (np.maximum(np.abs(g[:-1]), np.abs(g[1:])) for g in orders)
-    far = sigma[1:, None]
     limits = robot.limits
     velocity, acceleration = MARGIN * limits.velocity, MARGIN * limits.acceleration
     jerk = MARGIN * limits.jerk if limits.jerk is not None else None
@@ -233,12 +241,52 @@ def channel_bounds(channel: Channel, robot) -> Bounds:
         if wafer.norm is not None:
             along = min(along, wafer.norm)
         along *= MARGIN
-    highest = min(along, float(np.min(acceleration / g1)))
-    best, best_time = None, np.inf
-    for speed in float(np.min(velocity / g1)) * SPEED_STEP ** np.arange(SPEED_TRIES):
+    cells = _Cells(g1, g2, g3, velocity, acceleration, jerk, along, channel.length)
+    # Each cell's farthest distance from the inside, and from the mouth for a stop there.
+    far, left = sigma[1:, None], channel.length - sigma[:-1, None]
+    moving = _fastest(cells, far, np.full_like(left, np.inf))
+    if moving is None:
+        raise ValueError(f'no motion along the channel from {channel.inside.round(4).tolist()} '
+                         'keeps the limits (the arm is stretched or folded there)')
+    resting = _fastest(cells, far, left)
+    if resting is None or resting[1] >= moving[1]:
+        return moving[0]
+    return replace(moving[0], resting=resting[0])
 
-        def speeds(a):  # (cells, 1): the fastest s' at each cell's far end
-            return np.sqrt(np.minimum(speed ** 2, 2.0 * a * far))
+
+@dataclass(frozen=True, eq=False)
+class _Cells:
+    """A channel's grid cells at their largest derivatives, and the limits (``_fastest``)."""
+
+    g1: np.ndarray
+    g2: np.ndarray
+    g3: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    jerk: Optional[np.ndarray]
+    along: float
+    length: float
+
+
+def _fastest(cells: _Cells, far: np.ndarray, left: np.ndarray) -> Optional[tuple]:
+    """
+    Return (bounds, rest-to-rest time) of the fastest bounds that keep every cell's limits.
+
+    In a cell s' is at most V, sqrt(2 A ``far``) and sqrt(2 A ``left``) (inf: the profile
+    need not stop at the mouth); ``channel_bounds``. None when no bounds allow a motion.
+    """
+    g1, g2, g3, jerk = cells.g1, cells.g2, cells.g3, cells.jerk
+    best, best_time = None, np.inf
+    highest = min(cells.along, float(np.min(cells.acceleration / g1)))
+    stops = bool(np.isfinite(left).any())
+    # Moving on at the mouth: V keeps every cell's velocity limit. Stopping there: from
+    # the fastest V any cell allows, the caps on s' keeping each cell's (checked in fits).
+    by_cell = np.min(cells.velocity / g1, axis=1)
+    top = float(np.max(by_cell) if stops else np.min(by_cell))
+    for speed in top * SPEED_STEP ** np.arange(SPEED_TRIES):
+
+        def speeds(a, speed=speed):  # (cells, 1): the fastest s' in each cell
+            return np.sqrt(np.minimum(np.minimum(speed ** 2, 2.0 * a * far), 2.0 * a * left))
 
         def rate(a):  # the largest jerk bound with acceleration bound a (<= 0: none)
             if jerk is None:
@@ -246,9 +294,10 @@ def channel_bounds(channel: Channel, robot) -> Bounds:
             v = speeds(a)
             return float(np.min((jerk - g3 * v ** 3 - 3.0 * g2 * v * a) / g1))
 
-        def fits(a):
+        def fits(a):  # each limit a monotone function of a: bisected
             v = speeds(a)
-            return bool(np.all(g2 * v ** 2 + g1 * a <= acceleration)) and rate(a) > 0.0
+            return bool(not stops or np.all(g1 * v <= cells.velocity)) \
+                and bool(np.all(g2 * v ** 2 + g1 * a <= cells.acceleration)) and rate(a) > 0.0
 
         low, high = 0.0, highest
         if fits(high):
@@ -259,11 +308,10 @@ def channel_bounds(channel: Channel, robot) -> Bounds:
                 low, high = (middle, high) if fits(middle) else (low, middle)
         if not low > 0.0:
             continue
-        bounds = Bounds(speed, low, rate(low))
-        took = profile(channel.length, 0.0, bounds).duration
-        if took < best_time:
-            best, best_time = bounds, took
-    if best is None:
-        raise ValueError(f'no motion along the channel from {channel.inside.round(4).tolist()} '
-                         'keeps the limits (the arm is stretched or folded there)')
-    return best
+        # The largest A may leave J tiny (where s' peaks near large g3): lower ones too.
+        for a in low * ACCELERATION_STEP ** np.arange(ACCELERATION_TRIES):
+            bounds = Bounds(speed, a, rate(a))
+            took = profile(cells.length, 0.0, bounds).duration
+            if took < best_time:
+                best, best_time = bounds, took
+    return None if best is None else (best, best_time)

@@ -304,7 +304,7 @@ def compose(transfer: Optional[CubicBSpline], out: Optional[tuple],
         v, a = (0.0, 0.0) if transfer is None else mouth_state(transfer, channel, at_goal)
         a = min(max(a, -bounds.acceleration), 0.0)
         v = min(max(v, 0.0), bounds.reach(channel.length, a))
-        ways.append(Way(channel, profile(channel.length, v, bounds, a)))
+        ways.append(Way(channel, profile(channel.length, v, bounds.at(v, a), a)))
     return PortMove(ways[0], transfer, ways[1])
 
 
@@ -348,8 +348,10 @@ def free_end(channel: Channel, bounds: Bounds) -> FreeEnd:
         by_share = float(table(a, v / r, dy=1)[0, 0])
         return by_share / r, by_a - by_share * v * float(reach_slope(a)) / (r * r)
 
+    # No way is faster than the table's fastest, or than the stop (``Bounds.at``).
+    least = min(float(times.min()), bounds.at(0.0, 0.0).time(length, 0.0))
     return FreeEnd(g1, g2, braking, time, time_slopes, lambda a: float(reach(a)),
-                   lambda a: float(reach_slope(a)), float(times.min()))
+                   lambda a: float(reach_slope(a)), least)
 
 
 def _filled(times: np.ndarray) -> np.ndarray:

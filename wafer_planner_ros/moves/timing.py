@@ -34,6 +34,20 @@ class Bounds:
     speed: float
     acceleration: float
     jerk: float
+    resting: Optional['Bounds'] = None
+    """The bounds of a profile that ends at rest, where they differ (``at``)."""
+
+    def at(self, speed: float, acceleration: float) -> 'Bounds':
+        """
+        Return the bounds of a profile ending in this state: ``resting`` for a stop.
+
+        A profile that stops at the end of a channel moves slowly near it, so where the
+        limits tighten there (an arm nearly folded or stretched at a port's mouth) a stop
+        may use larger bounds than a profile that leaves at speed (``channel_bounds``).
+        """
+        if speed == 0.0 and acceleration == 0.0 and self.resting is not None:
+            return self.resting
+        return self
 
     def reach(self, length: float, acceleration: float = 0.0) -> float:
         """

@@ -117,6 +117,7 @@ def swap_cycle(planner: Planner, loadport: str, loadlock: str,
     if out.result is not None:
         start, goal = out.result.branches
         moves += (_faster(planner, _move(plan, ll, lp, EMPTY, (goal, start)), out),)
+
     def stop(start, goal, branches, load):
         return planner.stop_and_go(start, goal, load=load, branches=branches)
 
