@@ -57,3 +57,29 @@ def test_dense_points_respect_the_step():
     assert np.allclose(first[0], qa[0]) and np.allclose(first[-1], qb[0])
     assert np.abs(np.diff(first, axis=0)).max() <= 1e-3 + 1e-15
     assert (owner == 1).sum() == 2
+
+
+class _Touching:
+    """A body whose clearance is 0.195 (q1 + pi/2)^2 m: a link that just reaches a wall."""
+
+    def body_clearance(self, q):
+        q = np.atleast_2d(q)
+        return 0.195 * (q[:, :1] + np.pi / 2) ** 2
+
+
+def test_a_segment_that_touches_an_obstacle_at_one_point_is_refused_at_once():
+    # A study's variant whose shoulder link reached a wall exactly (0.39 m + 0.06 m of
+    # radius, the wall 0.45 m away) took five minutes to build its roadmap: each edge across
+    # the touching angle was refused only when a midpoint hit it to the last bit, and the
+    # pieces near it stayed open, doubling every other level.
+    model, lipschitz = _Touching(), np.array([[0.45, 0.0, 0.0]])
+    qa = np.array([[-np.pi / 2 - 0.3 - 0.01 * k, 0.2, 0.1] for k in range(20)])
+    qb = np.array([[-np.pi / 2 + 0.2 + 0.013 * k, -0.4, 0.3] for k in range(20)])
+    ok, evaluations = certify_segments(model, lipschitz, qa, qb, model.body_clearance(qa),
+                                       model.body_clearance(qb))
+    assert not ok.any()
+    assert evaluations < 20 * 2000
+    # Away from the touching angle the same segments' halves are certified.
+    ok, _ = certify_segments(model, lipschitz, qa, qa + 0.2, model.body_clearance(qa),
+                             model.body_clearance(qa + 0.2))
+    assert ok.all()
