@@ -15,7 +15,8 @@ It is compared with the same cycle as a controller without non-stop moves or an 
 limit set makes it: each way the move that stops at both port mouths
 (``Planner.stop_and_go``: straight out of the port to rest at its mouth, the transfer from
 rest to rest, straight in), loaded; the way out on its fastest elbow branches, the way back
-on those it ended and started on.
+on those it ended and started on (or the way out backwards, when that is faster: a stop
+reversed in time keeps every limit a stop does).
 
 Both are reported in seconds of motion per wafer, with wafers per hour of motion
 (3600 / seconds: the robot's motion alone, without the stations' own times) and the gain
@@ -124,7 +125,7 @@ def swap_cycle(planner: Planner, loadport: str, loadlock: str,
     chain = [_move(stop, lp, ll, LOADED, (None, None))]
     if chain[0].result is not None:
         start, goal = chain[0].result.branches
-        chain.append(_move(stop, ll, lp, LOADED, (goal, start)))
+        chain.append(_faster(planner, _move(stop, ll, lp, LOADED, (goal, start)), chain[0]))
     errors = tuple(f'{m.start} -> {m.goal}: {m.error}' for m in chain if m.result is None)
     return SwapCycle(loadport, loadlock, moves, () if errors else tuple(chain), errors)
 
@@ -137,7 +138,7 @@ def loadport_loadlock_pairs(cell) -> list:
 
 
 def _faster(planner: Planner, back: Move, out: Move) -> Move:
-    """Return the way back, or the way out backwards if faster and it verifies empty."""
+    """Return the way back, or the way out backwards if faster and it verifies for it."""
     result = planner.for_load(back.load).faster(back.result, out.result, backwards=True)
     return back if result is back.result else replace(back, result=result, error='')
 
