@@ -2,7 +2,8 @@
 ``wafer-study`` on this machine: the cost of a variant, throughput and parallel efficiency.
 
 Runs the example study (``config/example_study.yaml``: the default cell, 600-node roadmaps,
-knot-timing) with ``random.samples`` added so that it has 12 variants, through the
+the node's method, whole-curve; ``--method knot-timing`` for the quick one) with
+``random.samples`` added so that it has 12 variants, through the
 command-line tool as a user would, once with 1 local worker and once with 2, each into a
 fresh directory. Reported: wall time, variants per minute, the parallel efficiency from 1 to
 2 workers (t1 / (2 t2)), the median and spread of one variant's cost (its row's
@@ -12,7 +13,8 @@ third of its variants invalid, so cheap) and with every variant valid (the media
 variant's cost each). Writes
 ``results/study.json``.
 
-Run: ``python bench/bench_study.py [--samples N]`` (default 6: 12 variants).
+Run: ``python bench/bench_study.py [--samples N] [--method M]`` (default 6: 12 variants;
+the example study's method).
 """
 
 import argparse
@@ -50,10 +52,14 @@ def main() -> None:
     """Run the benchmark and write results/study.json."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--samples', type=int, default=6)
+    parser.add_argument('--method', default=None, help="the study's method (default: the "
+                        "example study's)")
     args = parser.parse_args()
     example = default_cell_path().parent / 'example_study.yaml'
     text = yaml.safe_load(example.read_text())
     text['study']['base'] = str(default_cell_path())
+    if args.method is not None:
+        text['study']['method'] = args.method
     text['study']['random'] = {'samples': args.samples, 'seed': 1}
     folder = Path(tempfile.mkdtemp(prefix='bench_study_'))
     study = folder / 'study.yaml'
@@ -71,6 +77,7 @@ def main() -> None:
     seconds_per_variant = times[2] / count * 2  # core-seconds per variant, 2 workers
     figures = {
         'machine': {'cpus': os.cpu_count(), 'python': platform.python_version()},
+        'method': text['study']['method'],
         'variants': count,
         'statuses': {s: sum(r['status'] == s for r in rows[1])
                      for s in ('planned', 'incomplete', 'invalid', 'failed')},
