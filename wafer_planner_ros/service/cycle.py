@@ -107,7 +107,8 @@ def swap_cycle(planner: Planner, loadport: str, loadlock: str,
     """
     Return the swap cycle of ``loadport`` and ``loadlock`` (both need a port).
 
-    ``plan(start, goal, branches, load)``: how one move is planned (default: ``planner``);
+    ``plan(start, goal, branches, load)``: how each non-stop move is planned (default:
+    ``planner``; the stop-and-go ones are ``Planner.stop_and_go``'s);
     raises PlanningError when it cannot be.
     """
     plan = plan or (lambda start, goal, branches, load: planner.plan(
