@@ -41,7 +41,7 @@ import numpy as np
 from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
-from wafer_planner_ros.trajectory.shape_problem import FreeEnd, POSITION_MARGIN, ShapeProblem
+from wafer_planner_ros.trajectory.shape_problem import FreeEnd, inner_limits, ShapeProblem
 from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import peaks_over, single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
@@ -99,7 +99,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     around = (np.arange(shape.clearance_samples) + 0.5) / shape.clearance_samples
     clearance = _clearance_samples(problem, np.repeat(np.arange(spans), len(around)),
                                    np.tile(around, spans))
-    lower, upper = _inner_limits(cell.robot)
+    lower, upper = inner_limits(cell.robot)
     iterations, message = 0, ''
     for rounds in range(1, shape.max_rounds + 1):
         if deadline is not None and time.monotonic() >= deadline:
@@ -180,12 +180,6 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     if not improved and not message:
         message = 'no proven curve beat the start' if proven else 'no curve was proven'
     return Shaping(best, improved, iterations, rounds, spans, message)
-
-
-def _inner_limits(robot) -> tuple:
-    """Return the position limits the free control points keep (``POSITION_MARGIN``)."""
-    lower, upper = robot.limits.position.T
-    return lower + POSITION_MARGIN, upper - POSITION_MARGIN
 
 
 def _clearance_samples(problem: ShapeProblem, span, fraction, every_body: bool = False,
@@ -278,7 +272,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
             values, jacobian = problem.rows(x, wafer, clearance, scale)
             return values[keep] * weights, jacobian[keep] * weights[:, None]
 
-    lb, ub = problem.bounds(*_inner_limits(problem.robot), scale)
+    lb, ub = problem.bounds(*inner_limits(problem.robot), scale)
     objective = problem.objective(scale)
     result = sqp.solve(linearised, objective, x0, lb, ub,
                        max_iterations=problem.settings.max_iterations,

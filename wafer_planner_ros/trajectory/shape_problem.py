@@ -33,6 +33,12 @@ CLEARANCE_SCALE = 0.01
 """m: clearance rows are (d - kept) / this, of the order of the other rows."""
 
 
+def inner_limits(robot) -> tuple:
+    """Return the position limits, ``POSITION_MARGIN`` inside, that moved control points keep."""
+    lower, upper = robot.limits.position.T
+    return lower + POSITION_MARGIN, upper - POSITION_MARGIN
+
+
 @dataclass(frozen=True, eq=False)
 class FreeEnd:
     """
@@ -289,8 +295,7 @@ class ShapeProblem:
         Then per free end: tau - time(v, a) >= 0, reach(a) - v >= 0, and its P1 and P2
         within the position limits (``POSITION_MARGIN`` inside, as the free points).
         """
-        lower, upper = self.robot.limits.position.T
-        lower, upper = lower + POSITION_MARGIN, upper - POSITION_MARGIN
+        lower, upper = inner_limits(self.robot)
         extra_values, extra = [], []
         for n, (k, state) in enumerate(zip(self._free_ends, self.speeds(points, intervals))):
             end = self.ends[k]
