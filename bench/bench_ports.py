@@ -21,7 +21,10 @@ stop-and-go way out), its time along the channels and on the transfer (shares of
 time), the cycle against the stop-and-go cycle, and on the default cell the way out
 against the optimal-control figure of the same move (direct collocation with IPOPT, every
 joint and wafer limit including jerk, the port model of the cell file: within its
-tolerance band). The results file written before, if any, is the comparison: each pair's
+tolerance band). And the way out as the node answers a request its station table does not
+hold (``budgeted``: a new planner, the packaged ``planning.optimise_budget`` and
+``planning.timeout``): its planning time and its cycle time against the unbudgeted one's.
+The results file written before, if any, is the comparison: each pair's
 way out and planning time then (``before_*``). Writes ``results/ports-<cell name>.json``.
 
 Run: ``python bench/bench_ports.py [CELL_FILE ...]`` (default: the three cells), or
@@ -43,6 +46,7 @@ from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service.cycle import loadport_loadlock_pairs, swap_cycle
+from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 
 HERE = Path(__file__).resolve().parent
@@ -52,6 +56,8 @@ OPTIMAL = {('loadport1', 'loadlock1'): 4.36, ('loadport1', 'loadlock2'): 3.67,
            ('loadport2', 'loadlock1'): 3.86, ('loadport3', 'loadlock2'): 2.80}
 """s: the optimal-control cycle time of the default cell's non-stop loaded moves."""
 DEFAULT_CELL = 'efem-3lp-2ll'
+PACKAGED = settings_from({})
+"""The node's packaged parameters: ``planning.optimise_budget`` and ``planning.timeout``."""
 
 
 def _timed(planner, start, goal) -> tuple:
@@ -63,6 +69,27 @@ def _timed(planner, start, goal) -> tuple:
         return None, time.perf_counter() - began, f'{exc.code.name}: {exc.message}'
     assert result.verification.ok
     return result.cycle_time, time.perf_counter() - began, None
+
+
+def budgeted(cell, roadmap, start: str, goal: str, load: str) -> dict:
+    """
+    Return the way out planned as the node plans a request its table does not hold.
+
+    A new planner (nothing kept from an earlier move: no transfer between the mouths), the
+    packaged ``planning.optimise_budget`` and the request's deadline ``planning.timeout``
+    from now: its planning time, cycle time and stops, or its error.
+    """
+    planner = Planner(cell, roadmap, PlannerSettings(method=WholeCurve))
+    began = time.perf_counter()
+    try:
+        result = planner.plan(start, goal, deadline=time.monotonic() + PACKAGED.timeout,
+                              budget=PACKAGED.optimise_budget, load=load)
+    except PlanningError as exc:
+        return {'planning_s': time.perf_counter() - began,
+                'error': f'{exc.code.name}: {exc.message}'}
+    assert result.verification.ok
+    return {'planning_s': time.perf_counter() - began, 'cycle_time': result.cycle_time,
+            'stops': result.metrics.get('stops'), 'error': None}
 
 
 def pair_row(planner, corridor, loadport, loadlock) -> dict:
@@ -93,6 +120,9 @@ def pair_row(planner, corridor, loadport, loadlock) -> dict:
         row['mouth_speeds'] = [out.result.metrics['start_mouth_speed'],
                                out.result.metrics['goal_mouth_speed']]
     row['corridor_curve'] = _timed(corridor, out.start, out.goal)[0]
+    row['budgeted'] = budgeted(planner.cell, planner.roadmap, out.start, out.goal, out.load)
+    if row['budgeted']['error'] is None and out.cycle_time is not None:
+        row['budgeted']['over_unbudgeted'] = row['budgeted']['cycle_time'] / out.cycle_time
     if cycle.cycle is not None and cycle.stop_and_go is not None:
         row['cycle_over_stop_and_go'] = cycle.cycle / cycle.stop_and_go
     optimal = OPTIMAL.get((loadport, loadlock)) if planner.cell.name == DEFAULT_CELL \
@@ -146,7 +176,9 @@ def main(argv=None) -> int:
                   f"(before: {row['before_non_stop']} s in {row['before_planning_s']} s); "
                   f"cycle {row['cycle']} s "
                   f"against stop-and-go {row['stop_and_go']} s "
-                  f"(x {row.get('cycle_over_stop_and_go', float('nan')):.3f})"
+                  f"(x {row.get('cycle_over_stop_and_go', float('nan')):.3f}); "
+                  f"budgeted {row['budgeted'].get('cycle_time')} s in "
+                  f"{row['budgeted']['planning_s']:.2f} s"
                   + ''.join(f'; {e}' for e in errors), flush=True)
 
         def median(key, rows=rows):
@@ -159,11 +191,26 @@ def main(argv=None) -> int:
             'median_over_own_stop_and_go': median('over_own_stop_and_go'),
             'median_cycle_over_stop_and_go': median('cycle_over_stop_and_go'),
             'median_non_stop_planning_s': float(np.median([r['planning_s'][0] for r in rows])),
+            'budgeted': _budgeted_summary(rows),
             'machine': {'python': platform.python_version(), 'cpus': os.cpu_count()}}
         RESULTS.mkdir(exist_ok=True)
         written.write_text(json.dumps(report, indent=1) + '\n')
         print(f'wrote {written}')
     return 0
+
+
+def _budgeted_summary(rows) -> dict:
+    """Return the budgeted ways out's planning time (median, p99, max) and cycle ratios."""
+    runs = [r['budgeted'] for r in rows if 'budgeted' in r]
+    seconds = [b['planning_s'] for b in runs]
+    ratios = [b['over_unbudgeted'] for b in runs if b.get('over_unbudgeted') is not None]
+    return {'budget_s': PACKAGED.optimise_budget, 'timeout_s': PACKAGED.timeout,
+            'planning_s_median': float(np.median(seconds)) if seconds else None,
+            'planning_s_p99': float(np.percentile(seconds, 99)) if seconds else None,
+            'planning_s_max': max(seconds, default=None),
+            'over_unbudgeted_median': float(np.median(ratios)) if ratios else None,
+            'over_unbudgeted_max': max(ratios, default=None),
+            'errors': sum(b['error'] is not None for b in runs)}
 
 
 if __name__ == '__main__':

@@ -1,10 +1,12 @@
 """Moves from and to inside a port: requested, planned through the channel, checked."""
 
 import copy
+from pathlib import Path
 
 from independent import check, port_ratios
 import numpy as np
 import pytest
+from wafer_planner_ros.cell.limits import EMPTY
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.moves.channel import Channel, channel_bounds
@@ -161,3 +163,30 @@ def test_the_whole_curve_leaves_and_enters_the_ports_without_stopping(default_ce
     assert _mouth_speed(default_cell, result, 'loadport2') > 0.05
     assert _mouth_speed(default_cell, result, 'loadlock1') > 0.05
     assert result.cycle_time < 0.8 * stopping.cycle_time
+
+
+@pytest.mark.slow
+def test_a_move_round_a_notch_blends_into_both_ports(roadmap_cache):
+    """
+    The notched cell's loadport1 -> loadlock1 goes round its notch: a path of 12 vertices.
+
+    Its transfer between the mouths, fitted with 8 spans, cut the notch's corners and was
+    never proven; the move then stopped at both mouths on the corridor curve (8.84 s; now
+    3.86 s, and 4.13 s stopping at the mouths).
+    """
+    cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'notched.yaml')
+    cached = load_or_build(cell, seed=2, cache_dir=roadmap_cache)
+    planner = Planner(cell, cached.roadmap, PlannerSettings(method=WholeCurve))
+    start, goal = 'loadport1:inside', 'loadlock1:inside'
+    result = planner.plan(start, goal, load=EMPTY)
+    check(cell, plan_json(result, roadmap_json(cached), cell.robot.joint_names),
+          result.start_q, result.goal_q)
+    assert result.metrics['stops'] == 0
+    assert _mouth_speed(cell, result, 'loadport1') > 0.05
+    assert _mouth_speed(cell, result, 'loadlock1') > 0.05
+    stopping = planner.stop_and_go(start, goal, load=EMPTY)
+    assert result.cycle_time <= stopping.cycle_time
+    # Its transfer between the mouths, too, is the whole curve's, not the corridor curve.
+    corridor = Planner(cell, cached.roadmap, PlannerSettings(method=KnotTiming)).plan(
+        start, goal, load=EMPTY)
+    assert stopping.cycle_time < 0.6 * corridor.cycle_time

@@ -213,6 +213,31 @@ def _colliding(cell, corridor) -> CubicBSpline:
     return CubicBSpline.from_intervals(points, corridor.trajectory.intervals)
 
 
+def test_a_scan_finds_every_stretch_nearer_a_wall_than_the_samples_keep(
+        default_cell, corridor):
+    """What the samples of an unproven curve's next round are added at, besides the proof's."""
+    curve = corridor.trajectory
+    problem = ShapeProblem(curve, default_cell, ShapeSettings(clearance=0.05),
+                           TimingSettings())
+    kept = shape_module._kept(problem)
+    times = shape_module._too_near(problem, curve)
+    model = default_cell.motion_model
+    assert len(times) % 3 == 0 and np.all((model.body_clearance(
+        curve.evaluate(times)) < kept).any(axis=1))
+    first, nearest, last = times.reshape(-1, 3).T
+    assert np.all(first <= nearest) and np.all(nearest <= last)
+    t = np.linspace(0.0, curve.duration, 20001)
+    near = (model.body_clearance(curve.evaluate(t)) < kept).any(axis=1)
+    assert 0 < near.sum() < len(t)
+    step = shape_module.SCAN_STEP
+    covered = ((t[near, None] >= first - step) & (t[near, None] <= last + step)).any(axis=1)
+    assert covered.all()
+    # Where nothing is to be kept, a curve proven free has no such stretch.
+    free = ShapeProblem(curve, default_cell, ShapeSettings(clearance=0.0, port_kept=0.0),
+                        TimingSettings())
+    assert len(shape_module._too_near(free, curve)) == 0
+
+
 def test_an_unproven_start_is_never_returned(default_cell, corridor):
     """A start through a wall: only proven curves come back, or none at all."""
     model = default_cell.motion_model

@@ -137,7 +137,8 @@ class WholeCurve(KnotTiming):
 
     The draft is the corridor's λ-scaled start (``KnotTiming``; its cycle time orders the
     elbow-branch combinations). Finishing optimises a curve of
-    ``ShapeSettings.coarse_spans`` spans fitted to the corridor (``coarse``), then refines
+    ``ShapeSettings.coarse_spans`` spans (as many as the path has vertices where that is
+    more) fitted to the corridor (``coarse``), then refines
     its optimum to as many spans as the corridor has (``ShapeSettings.min_spans`` at least)
     and optimises that. When the coarse stage proves no curve, the fine one starts from the
     corridor curve with optimised knot times (``KnotTiming``: feasible by construction), as
@@ -159,7 +160,9 @@ class WholeCurve(KnotTiming):
                deadline: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
         start, corridor = draft.work
-        shape, spans = self.shape, self.shape.coarse_spans
+        # A span per vertex of the path at least: a curve with fewer spans than the path
+        # has corners cuts them, into the walls they go round, and is never proven.
+        shape, spans = self.shape, max(self.shape.coarse_spans, len(corridor.path))
         coarse = optimise_shape(
             coarse_start(corridor.control_points, spans, self.cell.robot, self.settings),
             self.cell, replace(shape, min_spans=spans), self.settings,

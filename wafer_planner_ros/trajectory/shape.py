@@ -26,8 +26,9 @@ body Jacobian), its quadratic subproblems by daqp (``sqp``): about 1 ms an itera
 spans, where scipy's SLSQP took 4-6 ms (one BLAS thread) or 15-30 ms (two).
 Each answer is scaled by its own λ (Eq. 12) to meet every limit everywhere (and slowed
 further where it still exceeds one at the verification's times, ``meet_limits``), then
-proven collision-free; where a piece cannot be proven, clearance samples are added there
-and the problem is solved again. Only proven curves are kept: the fastest is returned, or
+proven collision-free; where a piece cannot be proven, clearance samples are added there,
+and wherever a scan of the curve finds a body nearer a wall than its samples keep, and the
+problem is solved again. Only proven curves are kept: the fastest is returned, or
 the start (if proven) when none beats it.
 """
 
@@ -51,6 +52,9 @@ logger = logging.getLogger(__name__)
 
 FAILED_SLOWER = 100.0
 """An answer this many times slower than the start is a failed solve, not a curve."""
+SCAN_STEP = 0.002
+"""s: where a curve is not proven, the step at which it is scanned for every stretch nearer
+a wall than its samples keep (``_too_near``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,10 +168,14 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             if first_proven or rescale <= 1.0 + timing.rescale_tolerance:
                 break
         else:
-            # Sample the pieces that could not be proven, for every body, and solve again.
+            # Sample the pieces that could not be proven, for every body, and every stretch
+            # of the curve nearer a wall than the samples keep (the proof stops at its
+            # first collision: one sample a round would leave the others for later rounds),
+            # and solve again.
             times = np.concatenate([proof.unproven.mean(axis=1), proof.unproven.ravel()])
             if proof.collision is not None:
                 times = np.append(times, proof.collision)
+            times = np.append(times, _too_near(problem, curve))
             more = _clearance_samples(problem, *_at_times(curve, times), every_body=True,
                                       curve=curve)
             clearance = tuple(np.concatenate([a, b]) for a, b in zip(clearance, more))
@@ -180,6 +188,33 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     if not improved and not message:
         message = 'no proven curve beat the start' if proven else 'no curve was proven'
     return Shaping(best, improved, iterations, rounds, spans, message)
+
+
+def _too_near(problem: ShapeProblem, curve: CubicBSpline) -> np.ndarray:
+    """
+    Return the times at which a body or a port margin of ``curve`` is nearer than kept.
+
+    The curve is scanned every ``SCAN_STEP``; of each stretch where a column of the
+    clearance (``_kept``) falls short, its first, nearest and last times.
+    """
+    times = np.linspace(0.0, curve.duration,
+                        max(2, int(np.ceil(curve.duration / SCAN_STEP)) + 1))
+    clearance = problem.model.body_clearance(curve.evaluate(times))
+    short = clearance < _kept(problem)
+    found = []
+    for column in np.nonzero(short.any(axis=0))[0]:
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], short[:, column], [0]])))
+        for first, end in zip(edges[::2], edges[1::2]):
+            nearest = first + int(np.argmin(clearance[first:end, column]))
+            found += [times[first], times[nearest], times[end - 1]]
+    return np.asarray(found, float)
+
+
+def _kept(problem: ShapeProblem) -> np.ndarray:
+    """Return what the samples keep of each column (every body, every port margin) (m)."""
+    model = problem.model
+    return np.concatenate([np.full(model.bodies, problem.settings.clearance),
+                           problem.settings.port_kept * model.tolerances])
 
 
 def _clearance_samples(problem: ShapeProblem, span, fraction, every_body: bool = False,
@@ -206,8 +241,7 @@ def _clearance_samples(problem: ShapeProblem, span, fraction, every_body: bool =
         on_curve = problem.clearances(curve, span, fraction)
         near |= on_curve < problem.settings.watch
     k, body = np.nonzero(near)
-    wanted = np.concatenate([np.full(model.bodies, problem.settings.clearance),
-                             problem.settings.port_kept * model.tolerances])[body]
+    wanted = _kept(problem)[body]
     start = start[k, body]
     kept = np.where(start > 0.0, np.minimum(wanted, 0.5 * start), wanted)
     return span[k], fraction[k], body, kept
