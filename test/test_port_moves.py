@@ -165,6 +165,51 @@ def test_the_whole_curve_leaves_and_enters_the_ports_without_stopping(default_ce
     assert result.cycle_time < 0.8 * stopping.cycle_time
 
 
+def test_a_move_through_the_ports_takes_the_transfer_its_station_pair_finished(
+        default_cell, roadmap_cache, monkeypatch):
+    """The station pair's other elbow-branch combinations serve as transfers, verified."""
+    planner, _ = _planner(default_cell, roadmap_cache, WholeCurve)
+    fresh, _ = _planner(default_cell, roadmap_cache, WholeCurve)
+    start, goal, branches = 'loadport1:inside', 'loadlock2:inside', (1, 1)
+    pair = planner.plan('loadport1', 'loadlock2')
+    assert pair.branches != branches and pair.metrics['candidates'] == 4
+    planned, verified = [], []
+    real_planned, real_verified = Planner._planned, Planner._verified
+
+    def spy_planned(self, a, b, *rest):
+        planned.append((a.label, b.label))
+        return real_planned(self, a, b, *rest)
+
+    def spy_verified(self, candidate, stage_ms):
+        verified.append(candidate.pair.branches)
+        return real_verified(self, candidate, stage_ms)
+
+    monkeypatch.setattr(Planner, '_planned', spy_planned)
+    monkeypatch.setattr(Planner, '_verified', spy_verified)
+    result = planner.plan(start, goal, branches=branches)
+    # The transfer between the mouths was not planned again: verified, then blended.
+    assert planned == [(start, goal)] and verified == [branches]
+    assert result.verification.ok and result.metrics['stops'] == 0
+    monkeypatch.undo()
+    alone = fresh.plan(start, goal, branches=branches)
+    assert result.cycle_time == pytest.approx(alone.cycle_time, rel=1e-9)
+    # One that fails its verification is planned again.
+    planner, _ = _planner(default_cell, roadmap_cache, WholeCurve)
+    planner.plan('loadport1', 'loadlock2')
+    refused = []
+
+    def failing(self, candidate, stage_ms):
+        refused.append(candidate.pair.branches)
+        raise PlanningError(ErrorCode.VERIFICATION_FAILED, 'refused by the test')
+
+    monkeypatch.setattr(Planner, '_verified', failing)
+    monkeypatch.setattr(Planner, '_planned', spy_planned)
+    planned.clear()
+    with pytest.raises(PlanningError):
+        planner.plan(start, goal, branches=branches)   # every candidate is refused
+    assert refused[0] == branches and planned[1] == ('loadport1', 'loadlock2')
+
+
 @pytest.mark.slow
 def test_a_move_round_a_notch_blends_into_both_ports(roadmap_cache):
     """

@@ -187,6 +187,9 @@ class Planner:
         self._legs: dict = {}
         """The transfers between port mouths planned so far (``_leg``), at most
         ``LEGS_KEPT``."""
+        self._drafts: dict = {}
+        """The other elbow-branch combinations those answers finished, not yet verified
+        (``_leg``), at most ``LEGS_KEPT``."""
         self._ends: dict = {}
         """The ways through ports as free ends (``_free_end``), at most ``LEGS_KEPT``."""
         self._bounds: dict = {}
@@ -411,6 +414,11 @@ class Planner:
                     stage_ms, total=(time.perf_counter() - begun) * 1000.0))
                 if until is None:  # a transfer between port mouths, should one ask for it
                     self.keep(result)
+                    for other in candidates:
+                        if other is not candidate:
+                            self._keep(self._drafts, _leg_key(
+                                other.pair.qa, other.pair.qb, other.pair.branches),
+                                (other, counts))
                 return result
             # Every faster one failed verification: finish those given up after all.
             candidates = [c for c in (self._finished(pair, bound, stage_ms, until, deadline)
@@ -603,15 +611,35 @@ class Planner:
         A transfer between two port mouths serves every move through those ports: the last
         ``LEGS_KEPT`` answers this planner gave without a budget are kept, by their ends'
         configurations and branches (``_planned``; the station table's station pairs are
-        such answers). One planned within a budget (``until``) is not kept.
+        such answers), and so are the other elbow-branch combinations such an answer
+        finished (optimised as far as they go, but not verified, as only the fastest is):
+        one of those is verified when a move first asks for it, and planned again if it
+        fails. One planned within a budget (``until``) is not kept.
         """
         key = _leg_key(start.configs[0][1], goal.configs[0][1],
                        (start.configs[0][0], goal.configs[0][0]))
         with self._legs_lock:
             leg = self._legs.get(key)
+            draft = None if leg is not None else self._drafts.pop(key, None)
+        if draft is not None:
+            leg = self._drafted(*draft)
         if leg is None:
             leg = self._planned(start, goal, deadline, until, time.perf_counter())
         return leg
+
+    def _drafted(self, candidate: '_Candidate', counts: dict) -> Optional[PlanResult]:
+        """Return a kept combination verified as an answer (and keep it), None if it fails."""
+        begun = time.perf_counter()
+        stage_ms = dict.fromkeys(STAGES + PARTS, 0.0)
+        try:
+            checked = self._verified(candidate, stage_ms)
+        except PlanningError as exc:
+            logger.debug('a kept combination is planned again: %s', exc)
+            return None
+        result = self._result(candidate, checked, counts, dict(
+            stage_ms, total=(time.perf_counter() - begun) * 1000.0))
+        self.keep(result)
+        return result
 
     def keep(self, result: PlanResult) -> None:
         """
