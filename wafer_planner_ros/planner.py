@@ -394,7 +394,8 @@ class Planner:
                 candidates.append(candidate)
         while candidates:
             # Shortest cycle first; only what is returned needs verifying.
-            for candidate in sorted(candidates, key=lambda c: c.shaped.trajectory.duration):
+            ordered = sorted(candidates, key=lambda c: c.shaped.trajectory.duration)
+            for k, candidate in enumerate(ordered):
                 _check_deadline(deadline)
                 try:
                     checked = self._verified(candidate, stage_ms)
@@ -414,11 +415,9 @@ class Planner:
                     stage_ms, total=(time.perf_counter() - begun) * 1000.0))
                 if until is None:  # a transfer between port mouths, should one ask for it
                     self.keep(result)
-                    for other in candidates:
-                        if other is not candidate:
-                            self._keep(self._drafts, _leg_key(
-                                other.pair.qa, other.pair.qb, other.pair.branches),
-                                (other, counts))
+                    for other in ordered[k + 1:]:  # the slower ones, not verified (``_leg``)
+                        self._keep(self._drafts, _leg_key(
+                            other.pair.qa, other.pair.qb, other.pair.branches), (other, counts))
                 return result
             # Every faster one failed verification: finish those given up after all.
             candidates = [c for c in (self._finished(pair, bound, stage_ms, until, deadline)
