@@ -216,8 +216,8 @@ def test_a_move_round_a_notch_blends_into_both_ports(roadmap_cache):
     The notched cell's loadport1 -> loadlock1 goes round its notch: a path of 12 vertices.
 
     Its transfer between the mouths, fitted with 8 spans, cut the notch's corners and was
-    never proven; the move then stopped at both mouths on the corridor curve (8.84 s; now
-    3.86 s, and 4.13 s stopping at the mouths).
+    never proven; the move then stopped at both mouths on the corridor curve, more than
+    twice as slow as it is now.
     """
     cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'notched.yaml')
     cached = load_or_build(cell, seed=2, cache_dir=roadmap_cache)
