@@ -188,8 +188,10 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
     assert not status['rebuild_failed'] and status['last_rebuild_error'] == ''
     release = threading.Event()
     load_or_build = worker.load_or_build
+    loads = []
 
     def held(*args, **kwargs):  # a rebuild that lasts until the test has looked at it
+        loads.append(1)
         release.wait(120)
         return load_or_build(*args, **kwargs)
 
@@ -197,12 +199,14 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
     try:
         rebuilt = harness.call('rebuild_roadmap')
         assert rebuilt.success, rebuilt.message
-        # While it runs: status answers, a second rebuild is refused, and requests are
-        # planned on the previous roadmap.
+        # While it runs: status answers, more rebuilds are queued as one more load, and
+        # requests are planned on the previous roadmap.
         during = harness.status()
         assert during['ready'] and during['busy_with'] == 'load'
         assert during['hash'] == status['hash']
-        assert not harness.call('rebuild_roadmap').success
+        for _ in range(2):
+            queued = harness.call('rebuild_roadmap')
+            assert queued.success and 'queued' in queued.message, queued.message
         harness.send_stations({'id': 'during-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
         answer = harness.result('during-rebuild')
         assert answer.level == DiagnosticStatus.OK, answer.message
@@ -214,6 +218,7 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
     after = harness.status()
     assert after['ready'] and not after['rebuild_failed']
     assert after['hash'] == status['hash']  # same parameters, same roadmap
+    assert len(loads) == 2  # the rebuild, then one more for the two queued
     harness.send_stations({'id': 'after-rebuild', 'from': 'loadport1', 'to': 'loadlock1'})
     assert harness.result('after-rebuild').level == DiagnosticStatus.OK
 

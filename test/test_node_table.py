@@ -166,3 +166,61 @@ class _Quiet:
         pass
 
     warning = info
+
+
+def test_planning_the_tables_stops_at_the_next_pair_when_asked(tmp_path, default_cell,
+                                                               default_roadmap):
+    """A rebuild or a stop ends the planning once the pair being planned is stored."""
+    from wafer_planner_ros.node.serving import build_station_tables, table_to_plan
+    settings = replace(settings_from({'roadmap.cache_dir': str(tmp_path)}),
+                       station_table_ports=False)
+    whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    published = []
+    build_station_tables(whole, settings, _Quiet(), {}, lambda load, table: published.append(
+        len(table)), stopped=lambda: len(published) == 2)
+    assert published == [1, 2]
+    stored = load_table(whole, tmp_path)
+    assert len(stored) == 2 and table_to_plan(whole, {LOADED: stored}, settings)
+
+
+@pytest.mark.slow
+def test_a_rebuild_while_the_table_is_planned_is_queued_and_the_table_finished_after_it(
+        roadmap_cache, tmp_path, default_cell, monkeypatch):
+    """Never refused: the table's planning stops after its pair, the load runs again."""
+    import threading
+    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
+    from wafer_planner_ros.node import serving, worker
+    isolate_dds(tmp_path)
+    cache = tmp_path / 'cache'
+    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    release, planned, loads = threading.Event(), [], []
+    build_and_store_table, load_or_build = serving.build_and_store_table, worker.load_or_build
+
+    def held(*args, **kwargs):  # the first pair is planned until the test has asked
+        planned.append(len(loads))
+        release.wait(120)
+        return build_and_store_table(*args, **kwargs)
+
+    def counted(*args, **kwargs):
+        loads.append(1)
+        return load_or_build(*args, **kwargs)
+
+    monkeypatch.setattr(serving, 'build_and_store_table', held)
+    monkeypatch.setattr(worker, 'load_or_build', counted)
+    node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
+                    'planning.station_table_ports': False, 'planning.timeout': 30.0})
+    try:
+        wait_for(lambda: planned, 60)
+        assert node.status()['busy_with'] == 'station_table'
+        asked = node.call('rebuild_roadmap')
+        assert asked.success and 'queued' in asked.message, asked.message
+        release.set()
+        pairs = len(station_pairs(default_cell))
+        wait_for(lambda: (lambda s: s['busy_with'] is None and s['station_table'] == pairs)(
+            node.status()), 300)
+        # One pair planned on the first load; the rebuild's load planned the other eleven.
+        assert len(loads) == 2 and planned.count(1) == 1 and planned.count(2) == pairs - 1
+        assert not node.status()['rebuild_failed']
+    finally:
+        release.set()
+        node.close()

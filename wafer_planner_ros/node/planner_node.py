@@ -54,7 +54,7 @@ from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
 from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
-from wafer_planner_ros.node.worker import PlanningWorker
+from wafer_planner_ros.node.worker import PlanningWorker, QUEUED
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
@@ -274,18 +274,20 @@ class WaferPlannerNode(Node):
 
     @guarded_service
     def _on_rebuild(self, request, response):
-        if not self._worker.rebuild():
-            busy = self._worker.status()['busy_with']
-            response.success = False
-            response.message = ('a roadmap load or rebuild is already under way' if busy in
-                                ('load', 'plan', None) else
-                                f'the roadmap is still being made ready (busy_with {busy}): '
-                                'ask again when ~/get_status shows it done')
-            return response
-        response.success = True
-        response.message = ('rebuild started with the current parameters; the current '
-                            'roadmap serves until the new one does (~/get_status: busy_with '
-                            '"load" until done, rebuild_failed if it failed)')
+        began = self._worker.rebuild()
+        response.success = began is not None
+        if began is None:
+            response.message = 'the node is stopping'
+        elif began == QUEUED:
+            response.message = ('rebuild queued: it starts with the parameters then in force '
+                                'once the load under way ends (a station table being planned '
+                                'stops after its current pair); the current roadmap serves '
+                                'until the new one does (~/get_status: busy_with "load" until '
+                                'done, rebuild_failed if it failed)')
+        else:
+            response.message = ('rebuild started with the current parameters; the current '
+                                'roadmap serves until the new one does (~/get_status: busy_with '
+                                '"load" until done, rebuild_failed if it failed)')
         return response
 
     @guarded_service

@@ -101,13 +101,15 @@ def table_to_plan(planner: Planner, tables: Dict[str, StationTable], settings) -
 
 
 def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, StationTable],
-                         publish: Callable[[str, StationTable], None]) -> None:
+                         publish: Callable[[str, StationTable], None],
+                         stopped: Callable[[], bool] = lambda: False) -> None:
     """
     Plan what the station tables lack, group by group (``table_groups``), pair by pair.
 
     ``tables``: those loaded; after each pair the table is stored and handed on,
     ``publish(load, table)``: a pair is answered from the table as soon as it is planned
-    (a second or two each).
+    (a second or two each). Before each pair ``stopped()`` is asked: True ends the planning
+    there (the pairs planned are stored; a later load plans the rest).
     """
     tables = dict(tables)
     whole = whole_curve(planner)  # one planner per limit set: its transfers serve every pair
@@ -121,6 +123,10 @@ def build_station_tables(planner: Planner, settings, logger, tables: Dict[str, S
         # The empty moves take the loaded one's curve where that is faster (and verifies).
         donor = tables.get(LOADED) if load == EMPTY else None
         for done, pair in enumerate(missing, 1):
+            if stopped():
+                logger.info(f'station table ({load}): planning stopped after {done - 1}/'
+                            f'{len(missing)} pairs (the rest are planned on a later load)')
+                return
             table = tables[load] = build_and_store_table(
                 whole.for_load(load), settings.cache_dir, None,
                 logger.warning, tables.get(load), [pair], donor)

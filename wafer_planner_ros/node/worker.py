@@ -18,12 +18,16 @@ the ports, loaded and empty), and so are the pairs whose
 cached entries failed verification (``busy_with: station_table``), pairs the tables do not
 hold yet being planned within the budget meanwhile. A rebuild does the same while the
 previous roadmap serves, and keeps it serving when it fails (``rebuild_failed`` in the
-status says why). Each request is planned on the roadmap in force when it was received, the
-one a recording pairs it with, and answered as ``service.planning`` says. The worker never
+status says why). A rebuild asked while a load is under way is never refused: the table's
+planning stops once the pair being planned is stored (so does a stopped node's), and the
+load starts again with the parameters in force then. Each request is planned on the
+roadmap in force when it was received, the one a recording pairs it with, and answered as
+``service.planning`` says. The worker never
 publishes: it hands every message, already serialised, to ``send``, which the node
 publishes from its executor. Every request gets exactly one answer, whatever happens: a
 failure of the node itself is answered ``INTERNAL`` with the reason. On stop the threads
-are left as they are (daemons): the node never waits for a plan or a table being planned.
+are left as they are (daemons): the node never waits for a plan or the pair of the table
+being planned.
 """
 
 from collections import deque
@@ -57,6 +61,8 @@ PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
 NOT_LOADED = 'the roadmap is being loaded or built'
+STARTED, QUEUED = 'started', 'queued'
+"""What ``PlanningWorker.rebuild`` did: a load began, or one more follows the one under way."""
 
 
 class Phase(enum.Enum):
@@ -114,6 +120,8 @@ class PlanningWorker:
         self._pending_ns: Optional[int] = None
         """When a loaded roadmap takes over, between being recorded and serving."""
         self._loading_cell = None
+        self._again = False
+        """A rebuild was asked while a load was under way: load again once it ends."""
         self.load_failed = False
         """The last load or rebuild failed (``last_load_error`` says why)."""
         self.last_load_error = ''
@@ -171,11 +179,21 @@ class PlanningWorker:
         self.answer_error(number, request.request_id, code, message, request.start,
                           request.goal)
 
-    def rebuild(self) -> bool:
-        """Start reloading the cell and roadmap; False when a load is already under way."""
+    def rebuild(self) -> Optional[str]:
+        """
+        Reload the cell and roadmap with the current parameters; never refused while running.
+
+        Return ``STARTED``; ``QUEUED`` while a load is under way (its station table's
+        planning stops once the pair being planned is stored, and the load starts again
+        with the parameters in force then: rebuilds asked meanwhile are one more load);
+        None once stopping.
+        """
         with self.lock:
+            if self._phase is Phase.STOPPING:
+                return None
             if self._phase is not Phase.IDLE:
-                return False
+                self._again = True
+                return QUEUED
             self._phase = Phase.LOADING
         try:
             loader = threading.Thread(target=self._load, name='wafer_planner_loader',
@@ -185,7 +203,7 @@ class PlanningWorker:
             self._enter(Phase.IDLE)
             raise
         self._threads[-1] = loader
-        return True
+        return STARTED
 
     def answer_error(self, number, request_id, code, message, start, goal,
                      planning_ms=None, roadmap=None) -> None:
@@ -413,13 +431,25 @@ class PlanningWorker:
     # ----------------------------------------------------------------- loading
 
     def _load(self) -> None:
-        """Load or build the roadmap for the current parameters; never raise."""
+        """Load or build the roadmap for the current parameters, again if asked; never raise."""
         try:
-            self._load_roadmap()
-        except Exception as exc:  # noqa: B902 - the node stays up and says why
-            self._load_failed(exc)
+            while True:
+                try:
+                    self._load_roadmap()
+                except Exception as exc:  # noqa: B902 - the node stays up and says why
+                    self._load_failed(exc)
+                with self.lock:
+                    again, self._again = self._again, False
+                    if not again or self._phase is Phase.STOPPING:
+                        return
+                    self._enter(Phase.LOADING, locked=True)
         finally:
             self._enter(Phase.IDLE)
+
+    def _table_stopped(self) -> bool:
+        """Return True once the station table's planning should stop: a rebuild, or stop."""
+        with self.lock:
+            return self._again or self._phase is Phase.STOPPING
 
     def _load_roadmap(self) -> None:
         settings = self._settings()
@@ -509,7 +539,8 @@ class PlanningWorker:
                 serving.service.set_table(load, table)
 
         try:
-            build_station_tables(planner, settings, self._logger, tables, publish)
+            build_station_tables(planner, settings, self._logger, tables, publish,
+                                 self._table_stopped)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
         self._enter(Phase.LOADING)  # the table planned: the load ends
