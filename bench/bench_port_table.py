@@ -13,7 +13,14 @@ is the way out backwards): its planning time, its cycle time, its own stop-and-g
 table, its transfers then known) and the ratio, its time along the channels and on the
 transfer (shares of its cycle time), its mouth speeds. Writes ``results/port-table.json``.
 
-Run: ``python bench/bench_port_table.py [--seeds 0 1 2] [CELL_FILE ...]``.
+Then, as the node does them (``node.serving.build_station_tables`` with a table cache, the
+packaged parameters): the whole table of a larger cell, ``cells/efem_4lp3ll.yaml`` (4
+loadports, 3 loadlocks; seed 0), and on the default cell (seed 0) a re-taught station:
+``RETAUGHT`` moved ``RETEACH_SHIFT`` along x after the whole table was stored, the time to
+hold the whole table again (the pairs of the other stations inherited, each verified).
+
+Run: ``python bench/bench_port_table.py [--seeds 0 1 2] [CELL_FILE ...]`` (cell files named:
+only those, without the larger cell and the re-teach).
 """
 
 import json
@@ -21,6 +28,7 @@ import os
 from pathlib import Path
 import platform
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -28,14 +36,20 @@ import numpy as np
 from wafer_planner_ros.cell.limits import EMPTY, LOADED
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
+from wafer_planner_ros.node.serving import build_station_tables, table_groups
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_table, port_pairs
 from wafer_planner_ros.trajectory.curve import Trajectory
+import yaml  # after the package: ament_flake8 takes wafer_planner_ros for a third party
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results'
+LARGER = HERE / 'cells' / 'efem_4lp3ll.yaml'
+RETAUGHT, RETEACH_SHIFT = 'loadport1', 0.005
+"""The station re-taught on the default cell, and by how much along x (m)."""
 
 
 def seed_report(cell, seed: int) -> dict:
@@ -94,6 +108,40 @@ def seed_report(cell, seed: int) -> dict:
     return report
 
 
+def node_tables(cell, seed: int, cache_dir) -> dict:
+    """Plan a cell's whole table as the node does after ``ready:``; return its figures."""
+    settings = settings_from({'roadmap.cache_dir': str(cache_dir)})
+    planner = Planner(cell, load_or_build(cell, RoadmapSettings(), seed).roadmap)
+    planned, began = [], time.perf_counter()
+
+    def publish(load, table):
+        planned.append(time.perf_counter() - began)
+
+    build_station_tables(planner, settings, _Quiet(), {}, publish)
+    return {'cell': cell.name, 'seed': seed, 'seconds': time.perf_counter() - began,
+            'pairs': sum(len(pairs) for _, pairs in table_groups(planner, settings)),
+            'longest_pair_s': float(np.max(np.diff([0.0] + planned)))}
+
+
+def reteach_report(seed: int = 0) -> dict:
+    """Return the default cell's whole table's time, then the same after a re-teach."""
+    with tempfile.TemporaryDirectory() as cache_dir:
+        first = node_tables(Cell.from_yaml(default_cell_path()), seed, cache_dir)
+        document = yaml.safe_load(default_cell_path().read_text())
+        document['stations'][RETAUGHT]['wafer_center'][0] += RETEACH_SHIFT
+        again = node_tables(Cell.from_dict(document), seed, cache_dir)
+    return {'station': RETAUGHT, 'shift_m': RETEACH_SHIFT, 'first': first, 'retaught': again}
+
+
+class _Quiet:
+    """A logger that keeps what the node would log to itself."""
+
+    def info(self, text):
+        pass
+
+    warning = error = info
+
+
 def main(argv=None) -> int:
     """Plan every cell's tables (or those of the cell files named) and write the results."""
     named = list(sys.argv[1:] if argv is None else argv)
@@ -127,6 +175,17 @@ def main(argv=None) -> int:
                'planning_s_max': float(np.max(planned))}
     print(f'moves through the ports planned: {len(planned)}, median '
           f"{summary['planning_s_median']:.2f} s, max {summary['planning_s_max']:.2f} s")
+    if not named:
+        with tempfile.TemporaryDirectory() as cache_dir:
+            summary['larger_cell'] = node_tables(Cell.from_yaml(LARGER), 0, cache_dir)
+        summary['reteach'] = reteach_report()
+        larger, reteach = summary['larger_cell'], summary['reteach']
+        print(f"{larger['cell']}: the whole table ({larger['pairs']} pairs) in "
+              f"{larger['seconds']:.1f} s (longest pair {larger['longest_pair_s']:.1f} s)")
+        print(f"{reteach['station']} re-taught by {reteach['shift_m'] * 1000:.0f} mm: the "
+              f"whole table again in {reteach['retaught']['seconds']:.1f} s (longest pair "
+              f"{reteach['retaught']['longest_pair_s']:.1f} s; first start "
+              f"{reteach['first']['seconds']:.1f} s)")
     RESULTS.mkdir(exist_ok=True)
     written = RESULTS / 'port-table.json'
     written.write_text(json.dumps({
