@@ -7,6 +7,7 @@ its SLSQP method on a problem with a known optimum, and plans that pass the inde
 check faster than the corridor curve.
 """
 
+import dataclasses
 import time
 
 from independent import check
@@ -294,7 +295,43 @@ def test_without_a_proven_coarse_curve_the_corridor_curve_starts_the_fine_stage(
     assert np.array_equal(starts[0].control_points, corridor.trajectory.control_points)
     assert result.verification.ok and result.verification.proof.certified
     assert 'coarse_cycle_time' not in result.metrics
+    assert result.metrics['fine_start'] == 'corridor'
     assert result.cycle_time < 0.8 * corridor.cycle_time
+
+
+@pytest.mark.slow
+def test_a_coarse_optimum_the_proof_refutes_starts_the_fine_stage(
+        default_cell, default_roadmap, roadmap_cache, monkeypatch):
+    """
+    The coarse stage converges into a wall between its samples: the fine stage proves it.
+
+    The default cell, empty, loadport1 on the elbow-right branch to loadlock1 on the left:
+    none of the coarse stage's optima is proven. Started from the last of them, the fine
+    stage proves a curve as fast as the one it finds from the corridor curve, in a small
+    share of its iterations.
+    """
+    planner = Planner(default_cell, default_roadmap,
+                      PlannerSettings(method='whole-curve')).for_load('empty')
+    start, goal = ([c.q for c in default_cell.stations[name].configs if c.elbow == elbow][0]
+                   for name, elbow in (('loadport1', 1), ('loadlock1', -1)))
+    warm = planner.plan(start, goal)
+    assert warm.metrics['fine_start'] == 'coarse, unproven'
+    assert warm.verification.ok and warm.verification.proof.certified and not warm.warnings
+    info = roadmap_json(load_or_build(default_cell, cache_dir=roadmap_cache))
+    check(default_cell, plan_json(warm, info, default_cell.robot.joint_names), start, goal)
+    real = methods.optimise_shape
+
+    def refuted_forgotten(*args, **options):
+        shaped = real(*args, **options)
+        if options.get('first_proven') and shaped is not None:
+            shaped = dataclasses.replace(shaped, unproven=None)
+        return shaped
+
+    monkeypatch.setattr(methods, 'optimise_shape', refuted_forgotten)
+    cold = planner.plan(start, goal)
+    assert cold.metrics['fine_start'] == 'corridor'
+    assert warm.metrics['shape_iterations'] < 0.25 * cold.metrics['shape_iterations']
+    assert warm.cycle_time <= 1.005 * cold.cycle_time
 
 
 def test_the_fine_stage_never_returns_a_slower_curve_than_the_coarse_one(

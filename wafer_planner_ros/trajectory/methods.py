@@ -140,12 +140,16 @@ class WholeCurve(KnotTiming):
     ``ShapeSettings.coarse_spans`` spans (as many as the path has vertices where that is
     more) fitted to the corridor (``coarse``), then refines
     its optimum to as many spans as the corridor has (``ShapeSettings.min_spans`` at least)
-    and optimises that. When the coarse stage proves no curve, the fine one starts from the
-    corridor curve with optimised knot times (``KnotTiming``: feasible by construction), as
-    it does for a curve that fails verification: the curve returned is proven collision-free
-    on its own (``proof``), not by the corridor. Within a time budget (``until``) the coarse
-    stage runs on past it to its first proven curve, up to half-way to the request's
-    ``deadline`` (``_past_budget``), and the fine stage stops at the budget.
+    and optimises that. When the coarse stage proves no curve, the fine one starts from its
+    last converged optimum (millimetres into a wall between its samples: the fine stage's
+    spans and samples prove it, or a curve near it, in a round or two), and, if that proves
+    nothing either, from the corridor curve with optimised knot times (``KnotTiming``:
+    feasible by construction), as it does for a curve that fails verification: the curve
+    returned is proven collision-free on its own (``proof``), not by the corridor. Within a
+    time budget (``until``) the coarse stage runs on past it to its first proven curve, up
+    to half-way to the request's ``deadline`` (``_past_budget``), and the fine stage stops
+    at the budget. ``fine_start`` in the metrics says which curve the fine stage started
+    from: ``coarse``, ``coarse, unproven`` or ``corridor``.
     """
 
     name = 'whole-curve'
@@ -175,11 +179,28 @@ class WholeCurve(KnotTiming):
         # The corridor curve is what is returned then: its timing may take longer than the
         # budget (its λ-scaled start is up to 10 x slower), up to half-way to the deadline.
         fitted = coarse.trajectory is not None
+        fine = replace(shape, min_spans=max(shape.min_spans,
+                                            len(corridor.control_points) - DEGREE))
+        shaped = None
+        if not fitted and coarse.unproven is not None:
+            # Its last optimum lies millimetres into a wall between its samples: the fine
+            # stage's spans and samples prove it or a curve near it in a round or two,
+            # where from the corridor curve (1.5-3.5 x slower) its subproblems fail for
+            # rounds on end.
+            shaped = optimise_shape(coarse.unproven, self.cell, fine, self.settings,
+                                    give_up_above, until, proven=False)
+            if shaped is None:
+                return None  # its optimum is far slower than the best so far
+            if shaped.trajectory is None:
+                shaped = None  # nothing proven: from the corridor curve, then
+            else:
+                fitted = True
         timed = None if fitted else super().finish(start, deadline=deadline)
-        begin = coarse.trajectory if fitted else timed.trajectory
-        spans = max(shape.min_spans, len(corridor.control_points) - DEGREE)
-        shaped = optimise_shape(begin, self.cell, replace(shape, min_spans=spans),
-                                self.settings, give_up_above, until)
+        begin = coarse.trajectory if coarse.trajectory is not None else \
+            shaped.trajectory if shaped is not None else timed.trajectory
+        if shaped is None:
+            shaped = optimise_shape(begin, self.cell, fine, self.settings, give_up_above,
+                                    until)
         if shaped is None:
             return None
         if shaped.trajectory is None:  # nothing proven: the verification refuses it
@@ -188,10 +209,12 @@ class WholeCurve(KnotTiming):
             f'whole-curve optimisation found no faster proven curve ({shaped.message}); '
             'returning the corridor curve',)
         metrics = {'optimised': shaped.improved or fitted,
+                   'fine_start': 'coarse' if coarse.trajectory is not None else
+                   'coarse, unproven' if fitted else 'corridor',
                    'coarse_iterations': coarse.iterations,
                    'shape_iterations': shaped.iterations, 'shape_rounds': shaped.rounds,
                    'spans': shaped.spans}
-        if fitted:
+        if coarse.trajectory is not None:
             metrics['coarse_cycle_time'] = coarse.trajectory.duration
 
         def fallback() -> Shaped:

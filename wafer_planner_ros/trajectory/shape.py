@@ -70,6 +70,9 @@ class Shaping:
     spans: int
     """Spans after knot refinement."""
     message: str = ''
+    unproven: Optional[CubicBSpline] = None
+    """When no curve was proven: the curve of the last solve that converged (λ-scaled), which
+    the proof refuted, a start for a finer problem; else None."""
 
 
 def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettings(),
@@ -104,7 +107,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     clearance = _clearance_samples(problem, np.repeat(np.arange(spans), len(around)),
                                    np.tile(around, spans))
     lower, upper = inner_limits(cell.robot)
-    iterations, message = 0, ''
+    iterations, message, unproven = 0, '', None
     for rounds in range(1, shape.max_rounds + 1):
         if deadline is not None and time.monotonic() >= deadline:
             message = 'the time budget ran out'
@@ -168,6 +171,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             if first_proven or rescale <= 1.0 + timing.rescale_tolerance:
                 break
         else:
+            if result.converged:
+                unproven = curve
             # Sample the pieces that could not be proven, for every body, and every stretch
             # of the curve nearer a wall than the samples keep (the proof stops at its
             # first collision: one sample a round would leave the others for later rounds),
@@ -187,7 +192,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     improved = best is not None and best is not problem.start
     if not improved and not message:
         message = 'no proven curve beat the start' if proven else 'no curve was proven'
-    return Shaping(best, improved, iterations, rounds, spans, message)
+    return Shaping(best, improved, iterations, rounds, spans, message,
+                   unproven if best is None else None)
 
 
 def _too_near(problem: ShapeProblem, curve: CubicBSpline) -> np.ndarray:
