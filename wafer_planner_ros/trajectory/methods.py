@@ -148,8 +148,9 @@ class WholeCurve(KnotTiming):
     returned is proven collision-free on its own (``proof``), not by the corridor. Within a
     time budget (``until``) the coarse stage runs on past it to its first proven curve, up
     to half-way to the request's ``deadline`` (``_past_budget``), and the fine stage stops
-    at the budget. ``fine_start`` in the metrics says which curve the fine stage started
-    from: ``coarse``, ``coarse, unproven`` or ``corridor``.
+    at the budget. The metrics say where the fine stage started: from the coarse stage's
+    proven curve (``coarse_cycle_time`` its cycle time), from its unproven optimum
+    (``fine_from_unproven``), or else from the corridor curve.
     """
 
     name = 'whole-curve'
@@ -209,8 +210,7 @@ class WholeCurve(KnotTiming):
             f'whole-curve optimisation found no faster proven curve ({shaped.message}); '
             'returning the corridor curve',)
         metrics = {'optimised': shaped.improved or fitted,
-                   'fine_start': 'coarse' if coarse.trajectory is not None else
-                   'coarse, unproven' if fitted else 'corridor',
+                   'fine_from_unproven': fitted and coarse.trajectory is None,
                    'coarse_iterations': coarse.iterations,
                    'shape_iterations': shaped.iterations, 'shape_rounds': shaped.rounds,
                    'spans': shaped.spans}
