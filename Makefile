@@ -65,6 +65,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_table.py
 	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
 	$(ENV) $(PY) bench/bench_ports.py
+	$(ENV) $(PY) bench/bench_port_table.py
 	$(ENV) $(PY) bench/bench_study.py
 
 clean:
