@@ -432,19 +432,21 @@ class PlanningWorker:
 
     def _load(self) -> None:
         """Load or build the roadmap for the current parameters, again if asked; never raise."""
-        try:
-            while True:
-                try:
-                    self._load_roadmap()
-                except Exception as exc:  # noqa: B902 - the node stays up and says why
-                    self._load_failed(exc)
-                with self.lock:
-                    again, self._again = self._again, False
-                    if not again or self._phase is Phase.STOPPING:
-                        return
-                    self._enter(Phase.LOADING, locked=True)
-        finally:
-            self._enter(Phase.IDLE)
+        while True:
+            try:
+                self._load_roadmap()
+            except Exception as exc:  # noqa: B902 - the node stays up and says why
+                self._load_failed(exc)
+            except BaseException:
+                self._enter(Phase.IDLE)
+                raise
+            # Under one hold of the lock: a rebuild asked up to here is loaded next, one
+            # asked after it finds the worker idle and starts its own load.
+            with self.lock:
+                again, self._again = self._again, False
+                self._enter(Phase.LOADING if again else Phase.IDLE, locked=True)
+                if not again or self._phase is Phase.STOPPING:
+                    return
 
     def _table_stopped(self) -> bool:
         """Return True once the station table's planning should stop: a rebuild, or stop."""
