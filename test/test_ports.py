@@ -137,6 +137,54 @@ def test_the_margin_gradient_is_the_derivative_and_the_lipschitz_bound_holds(def
     q = np.array([_at(default_cell, 'loadport2', s, y, h) for s, y, h in zip(
         rng.uniform(-0.05, 0.35, 40), rng.uniform(-0.003, 0.003, 40),
         rng.uniform(-0.02, 0.02, 40))])
+    values = _assert_the_gradient_is_the_derivative(model, q)
+    other = q + rng.uniform(-0.05, 0.05, q.shape)
+    change = np.abs(model.margins(other) - values)
+    assert np.all(change <= np.abs(other - q) @ model.lipschitz.T + 1e-12)
+
+
+def test_a_keep_out_round_another_ports_mouth_only_lowers_its_margins(default_cell):
+    """
+    The optimiser's disc round a mouth: smooth in front of it, never above the rule.
+
+    A port a curve starts or ends at (its mouth is where the curve begins) gets no disc;
+    every other port's margins are the rule's, or lower where the wafer is turned within
+    the disc's radius of its mouth, so a curve that keeps them keeps the rule.
+    """
+    model = default_cell.port_model
+    names = [p.station for p in model.ports]
+    k, own = names.index('loadport2'), names.index('loadport1')
+    starting = _at(default_cell, 'loadport1', 0.0)
+    kept = model.keeping_out(0.02, starting[None])
+    assert kept.keep_out[own] == 0.0 and kept.keep_out[k] == 0.02
+    rng = np.random.default_rng(5)
+    q = np.array([_at(default_cell, 'loadport2', s, y, h) for s, y, h in zip(
+        rng.uniform(-0.04, 0.04, 60), rng.uniform(-0.04, 0.04, 60),
+        rng.uniform(-1.0, 1.0, 60))])
+    rule, lowered = model.margins(q), kept.margins(q)
+    assert np.all(lowered <= rule)
+    np.testing.assert_array_equal(lowered[:, 4 * own:4 * own + 4], rule[:, 4 * own:4 * own + 4])
+    # Turned 0.3 rad, 1 cm in front of the tip on the axis (its "turned left" margin): the
+    # rule's 7.1 mm, the disc's 10 mm short of its radius.
+    front = _at(default_cell, 'loadport2', -0.01, 0.0, 0.3)[None]
+    turned = 4 * k + 2
+    np.testing.assert_allclose(model.margins(front)[0, turned], 0.01 * 2 ** -0.5, atol=1e-9)
+    np.testing.assert_allclose(kept.margins(front)[0, turned], -0.01, atol=1e-9)
+    _assert_the_gradient_is_the_derivative(kept, q)
+    # A path that passes 6 mm in front of the mouth turned breaks the keep-out; one that
+    # passes there aligned with the port does not, nor one 3 cm away turned.
+    assert kept.breaks_keep_out(np.stack([
+        starting, _at(default_cell, 'loadport2', -0.006, 0.0, 0.3)]))
+    assert not kept.breaks_keep_out(np.stack([
+        starting, _at(default_cell, 'loadport2', -0.006, 0.0, 0.0)]))
+    assert not kept.breaks_keep_out(np.stack([
+        starting, _at(default_cell, 'loadport2', -0.03, 0.0, 0.3)]))
+    with pytest.raises(ValueError, match='one radius >= 0 per port'):
+        type(model)(model.arm, model.ports, [-0.01] * len(model.ports))
+
+
+def _assert_the_gradient_is_the_derivative(model, q) -> np.ndarray:
+    """Check ``margins_gradient`` against forward differences; return the margins."""
     values, gradient = model.margins_gradient(q)
     step = 1e-7
     for i in range(3):
@@ -144,6 +192,4 @@ def test_the_margin_gradient_is_the_derivative_and_the_lipschitz_bound_holds(def
         moved[:, i] += step
         numeric = (model.margins(moved) - values) / step
         np.testing.assert_allclose(gradient[:, :, i], numeric, atol=1e-5)
-    other = q + rng.uniform(-0.05, 0.05, q.shape)
-    change = np.abs(model.margins(other) - values)
-    assert np.all(change <= np.abs(other - q) @ model.lipschitz.T + 1e-12)
+    return values

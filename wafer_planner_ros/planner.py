@@ -60,6 +60,9 @@ stations with ports on both elbow branches, with 32 transfers between them."""
 LEGS_SHARE = 0.75
 """Of the time to a budgeted request's deadline, the share a move through a port may spend
 on its transfer (``_through``): the rest verifies and answers."""
+AT_MOUTH = 1e-9
+"""m: joint angles whose wafer centre is at most this far past a port's mouth are at the
+mouth, not inside the port (rounding puts a retracted pose a hair inside)."""
 MAX_WAY_TIME = 30.0
 """s: a way through a port that takes longer from rest to rest is refused (NO_PATH)."""
 CHANNEL_CHECKS = 65
@@ -306,6 +309,11 @@ class Planner:
             raise PlanningError(ErrorCode.OUT_OF_LIMITS, f'{role} {q.tolist()}: {how}')
         port, robot = ports.ports[k], self.cell.robot
         length = float(port.offsets(robot.arm.wafer_center(q[None]))[0][0])
+        if length <= AT_MOUTH:
+            # At the mouth itself, a rounding inside (a station's own retracted pose):
+            # there is no way out to take, and one of that length would end at the
+            # mouth's inverse kinematics, not exactly at q.
+            return None
         channel = Channel.out_of(robot.arm, q, port.axis, length)
         lower, upper = robot.limits.position.T
         along = channel.configurations(np.linspace(0.0, length, CHANNEL_CHECKS))

@@ -27,6 +27,15 @@ optimiser's linearised rows need (a wafer on the axis sits on the kink of |y|). 
 heading, so turning joint i by dq changes them by at most ``PortModel.lipschitz[.., i]
 |dq|`` (the distance from joint i's axis to the wafer centre, or R if larger: the heading
 moves by dq itself).
+
+**A keep-out round a mouth, for the optimiser.** A wafer that sweeps past a port's mouth
+turned is held outside the wedge s > |y|, whose tip is a corner: an optimum that grazes it
+sits on a constraint with a kink, and an optimiser whose rows are taken at samples cuts
+the corner between them, round after round. ``PortModel.keeping_out`` gives a port a disc
+of a radius round the tip besides: its outside term becomes min(outside, sqrt(s^2 + y^2)
+- radius), smooth in front of the mouth. That only ever lowers a margin, so a curve that
+keeps these margins keeps the rule's; the proof and the verification keep the rule
+itself.
 """
 
 from dataclasses import dataclass
@@ -131,10 +140,19 @@ def inverse_on_branch(arm, centers: np.ndarray, heading: float, elbow: int) -> n
 class PortModel:
     """The port margins of every port of a cell (see the module): four per port."""
 
-    def __init__(self, arm, ports: Sequence[Port]):
-        """Keep the arm and the ports; a cell without ports has no margins at all."""
+    def __init__(self, arm, ports: Sequence[Port], keep_out: Optional[Sequence[float]] = None):
+        """
+        Keep the arm and the ports; a cell without ports has no margins at all.
+
+        ``keep_out``: per port, the radius (m) of the disc round its mouth kept out of as
+        well (0: none; see the module); None: none at all.
+        """
         self.arm = arm
         self.ports: Tuple[Port, ...] = tuple(ports)
+        self.keep_out = np.zeros(len(self.ports)) if keep_out is None else \
+            np.asarray(keep_out, float)
+        if self.keep_out.shape != (len(self.ports),) or not np.all(self.keep_out >= 0.0):
+            raise ValueError(f'keep_out must be one radius >= 0 per port, not {keep_out!r}')
         reach = np.cumsum(np.asarray(arm.link_lengths, float)[::-1])[::-1]   # (3,)
         rows = []
         for port in self.ports:
@@ -146,6 +164,38 @@ class PortModel:
                            for kind in MARGINS)
         self.tolerances = np.repeat([p.lateral_tolerance for p in self.ports], len(MARGINS))
         """(4P,) m: the largest value of each margin (the port's lateral tolerance)."""
+
+    def keeping_out(self, radius: float, ends: np.ndarray) -> 'PortModel':
+        """
+        Return these margins with a disc of ``radius`` round every other port's mouth.
+
+        ``ends`` (N, 3): configurations a curve starts or ends at; a port whose mouth (the
+        wafer centre at its retracted pose) one of them puts the wafer at gets no disc,
+        as the curve leaves or enters it there.
+        """
+        centers = self.arm.wafer_center(np.atleast_2d(np.asarray(ends, float)))
+        return PortModel(self.arm, self.ports, [
+            0.0 if np.min(np.hypot(*(centers - port.retracted).T)) < 1e-9 else radius
+            for port in self.ports])
+
+    def breaks_keep_out(self, path: np.ndarray) -> bool:
+        """
+        Return whether configurations along a curve come within a keep-out, turned.
+
+        Turned: the wafer off that port's axis or heading by more than its tolerance
+        (where the rule holds it to the outside term, which the disc lowers).
+        """
+        path = np.atleast_2d(np.asarray(path, float))
+        centers, heading = self.arm.wafer_center(path), self.arm.heading(path)
+        for port, radius in zip(self.ports, self.keep_out):
+            if radius <= 0.0:
+                continue
+            s, y = port.offsets(centers)
+            loose = (np.abs(y) > port.lateral_tolerance) | \
+                (np.abs(_wrapped(heading - port.heading)) > port.heading_tolerance)
+            if np.any(np.hypot(s, y)[loose] < radius):
+                return True
+        return False
 
     def __len__(self) -> int:
         """Return the number of margins (four per port)."""
@@ -200,6 +250,11 @@ class PortModel:
             side = np.where(y >= 0.0, 1.0, -1.0)
             dh = _wrapped(heading - port.heading)
             outside = (np.abs(y) - s) / np.sqrt(2.0)
+            radius = self.keep_out[k]
+            if radius > 0.0:
+                tip = np.hypot(s, y)
+                in_disc = tip - radius < outside
+                outside = np.minimum(outside, tip - radius)
             tol, scale = port.lateral_tolerance, port.heading_scale
             terms = (tol - y, tol + y, scale * (port.heading_tolerance - dh),
                      scale * (port.heading_tolerance + dh))
@@ -211,6 +266,10 @@ class PortModel:
             along = np.einsum('i,nij->nj', port.axis, jac)                  # ds/dq
             across = np.einsum('i,nij->nj', port.normal, jac)               # dy/dq
             d_outside = (side[:, None] * across - along) / np.sqrt(2.0)
+            if radius > 0.0:
+                d_tip = (s[:, None] * along + y[:, None] * across) / \
+                    np.maximum(tip, 1e-12)[:, None]
+                d_outside = np.where(in_disc[:, None], d_tip, d_outside)
             turning = np.full_like(across, scale)                            # d(R dh)/dq
             for m, (term, d_term) in enumerate(zip(terms, (-across, across, -turning,
                                                            turning))):
@@ -237,6 +296,7 @@ class PortedModel:
     def __init__(self, clearance_model, port_model: PortModel, body_lipschitz: np.ndarray):
         """Join a clearance model (bodies' Lipschitz rows ``body_lipschitz``) and a port model."""
         self.clearance_model, self.port_model = clearance_model, port_model
+        self._body_lipschitz = body_lipschitz
         self.lipschitz = np.vstack([body_lipschitz, port_model.lipschitz])
         self.body_names = tuple(clearance_model.body_names) + port_model.names
         self.bodies = clearance_model.body_count
@@ -244,6 +304,13 @@ class PortedModel:
         self.body_count = self.bodies + len(port_model)
         self.tolerances = port_model.tolerances
         """(4P,) m: the largest value of each port margin."""
+
+    def keeping_out(self, radius: float, ends: np.ndarray) -> 'PortedModel':
+        """Return this model with ``PortModel.keeping_out``'s margins (the optimiser's)."""
+        if radius <= 0.0 or not len(self.port_model):
+            return self
+        return PortedModel(self.clearance_model, self.port_model.keeping_out(radius, ends),
+                           self._body_lipschitz)
 
     def body_clearance(self, q: np.ndarray) -> np.ndarray:
         """Return every body's clearance then every port margin (N, 4 + 4P), in m."""

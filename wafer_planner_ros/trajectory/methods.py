@@ -19,10 +19,17 @@ from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
 from wafer_planner_ros.trajectory.coarse import coarse_start
 from wafer_planner_ros.trajectory.corridor import Corridor
 from wafer_planner_ros.trajectory.curve import Trajectory
-from wafer_planner_ros.trajectory.shape import optimise_shape
+from wafer_planner_ros.trajectory.shape import optimise_shape, Shaping
+from wafer_planner_ros.trajectory.shape_problem import breaks_keep_outs
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
+
+PLAIN_ROUNDS = 2
+"""Rounds of the coarse stage under the port rule alone, where its start breaks a keep-out
+round another port's mouth (``WholeCurve.finish``): where that stage wins it proves its
+curve in one or two; where the keep-out is needed it proves nothing, and more rounds would
+only cost."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,11 +175,29 @@ class WholeCurve(KnotTiming):
         # A span per vertex of the path at least: a curve with fewer spans than the path
         # has corners cuts them, into the walls they go round, and is never proven.
         shape, spans = self.shape, max(self.shape.coarse_spans, len(corridor.path))
-        coarse = optimise_shape(
-            coarse_start(corridor.control_points, spans, self.cell.robot, self.settings),
-            self.cell, replace(shape, min_spans=spans), self.settings,
-            None if give_up_above is None else shape.coarse_give_up * give_up_above,
-            _past_budget(until, deadline), proven=False, first_proven=True)
+        fitted_start = coarse_start(corridor.control_points, spans, self.cell.robot,
+                                    self.settings)
+
+        def coarse_stage(keep_out: bool, rounds: int = shape.max_rounds) -> Optional[Shaping]:
+            return optimise_shape(
+                fitted_start, self.cell, replace(shape, min_spans=spans, max_rounds=rounds),
+                self.settings,
+                None if give_up_above is None else shape.coarse_give_up * give_up_above,
+                _past_budget(until, deadline), proven=False, first_proven=True,
+                keep_out=keep_out)
+
+        keep_out = _keeps_out(until, deadline)
+        coarse = coarse_stage(keep_out)
+        if keep_out and breaks_keep_outs(fitted_start, self.cell.motion_model,
+                                         shape.port_keep_out):
+            # The start passes turned near another port's mouth: pushed out of the disc
+            # round it, or under the port rule alone (a second opinion of PLAIN_ROUNDS
+            # rounds), whichever proves the faster curve (the first where the optimum
+            # grazes the mouth, the second where the way past it is narrow); the fine
+            # stage keeps the same.
+            plain = coarse_stage(False, min(shape.max_rounds, PLAIN_ROUNDS))
+            if _faster(plain, coarse):
+                coarse, keep_out = plain, False
         if coarse is None:
             return None  # its optimum is far slower than the best so far
         if coarse.trajectory is not None and coarse.trajectory.duration >= start.estimate:
@@ -189,7 +214,7 @@ class WholeCurve(KnotTiming):
             # where from the corridor curve (1.5-3.5 x slower) its subproblems fail for
             # rounds on end.
             shaped = optimise_shape(coarse.unproven, self.cell, fine, self.settings,
-                                    give_up_above, until, proven=False)
+                                    give_up_above, until, proven=False, keep_out=keep_out)
             if shaped is None:
                 return None  # its optimum is far slower than the best so far
             if shaped.trajectory is None:
@@ -201,7 +226,7 @@ class WholeCurve(KnotTiming):
             shaped.trajectory if shaped is not None else timed.trajectory
         if shaped is None:
             shaped = optimise_shape(begin, self.cell, fine, self.settings, give_up_above,
-                                    until)
+                                    until, keep_out=keep_out)
         if shaped is None:
             return None
         if shaped.trajectory is None:  # nothing proven: the verification refuses it
@@ -240,12 +265,24 @@ class WholeCurve(KnotTiming):
         shaped = optimise_shape(transfer, self.cell, replace(self.shape, min_spans=spans),
                                 self.settings, give_up_above,
                                 min((t for t in (until, _half_way(deadline)) if t is not None),
-                                    default=None), proven=True, ends=ends)
+                                    default=None), proven=True, ends=ends,
+                                keep_out=_keeps_out(until, deadline))
         if shaped is None or not shaped.improved:
             return None
         return Shaped(shaped.trajectory, transfer.duration,
                       {'optimised': True, 'blend_iterations': shaped.iterations,
                        'blend_rounds': shaped.rounds, 'spans': shaped.spans})
+
+
+def _keeps_out(until: Optional[float], deadline: Optional[float]) -> bool:
+    """
+    Return whether the rows keep the discs round other ports' mouths: not within a budget.
+
+    A budgeted answer is the first proven curve, and pushing a start out of a disc costs
+    rounds it does not have: within the node's budget, the default cell's loadport1 ->
+    loadlock2 came to 1.057 x its unbudgeted cycle time with the discs, 1.0007 x without.
+    """
+    return until is None and deadline is None
 
 
 def _past_budget(until: Optional[float], deadline: Optional[float]) -> Optional[float]:
@@ -272,3 +309,12 @@ def _half_way(deadline: Optional[float]) -> Optional[float]:
 
 METHODS = {method.name: method for method in (KnotTiming, WholeCurve)}
 """The methods by name."""
+
+
+def _faster(one: Optional[Shaping], other: Optional[Shaping]) -> bool:
+    """Return whether a coarse stage's outcome is better than another's (None: given up)."""
+    if one is None or other is None:
+        return other is None and one is not None
+    if one.trajectory is None or other.trajectory is None:
+        return other.trajectory is None and one.trajectory is not None
+    return one.trajectory.duration < other.trajectory.duration

@@ -80,7 +80,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
                    give_up_above: Optional[float] = None,
                    deadline: Optional[float] = None, proven: bool = True,
                    first_proven: bool = False,
-                   ends: Sequence[Optional[FreeEnd]] = (None, None)) -> Optional[Shaping]:
+                   ends: Sequence[Optional[FreeEnd]] = (None, None),
+                   keep_out: bool = True) -> Optional[Shaping]:
     """
     Return the fastest proven curve from a start that meets every limit (see the module).
 
@@ -95,8 +96,11 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     samples (its λ-scaling meets the limit all the same, a little slower). ``ends``: the
     start's and the goal's ``FreeEnd`` (None: at rest there); with free ends every cycle
     time compared is the curve's and its ends' paths' together (``ShapeProblem.total``).
+    ``keep_out``: whether the rows keep the discs round the ports' mouths
+    (``shape_problem.keep_out_model``; dropped where the first solve fails to push the start
+    out of them) or the port rule alone.
     """
-    problem = ShapeProblem(start, cell, shape, timing, ends)
+    problem = ShapeProblem(start, cell, shape, timing, ends, keep_out)
     current = problem.start
     best = current if proven else None
     spans = problem.spans
@@ -104,8 +108,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     wafer = (np.append(np.repeat(np.arange(spans), len(inside)), spans - 1),
              np.append(np.tile(inside, spans), 1.0))
     around = (np.arange(shape.clearance_samples) + 0.5) / shape.clearance_samples
-    clearance = _clearance_samples(problem, np.repeat(np.arange(spans), len(around)),
-                                   np.tile(around, spans))
+    grid = (np.repeat(np.arange(spans), len(around)), np.tile(around, spans))
+    clearance = _clearance_samples(problem, *grid)
     lower, upper = inner_limits(cell.robot)
     iterations, message, unproven = 0, '', None
     for rounds in range(1, shape.max_rounds + 1):
@@ -120,7 +124,14 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
         points[~problem.fixed] = np.clip(points[~problem.fixed], lower, upper)
         intervals = np.maximum(result.intervals, problem.min_interval)
         points = problem.settled(points, intervals, result.speeds)
-        if not (np.all(np.isfinite(points)) and np.all(np.isfinite(intervals))):
+        finite = np.all(np.isfinite(points)) and np.all(np.isfinite(intervals))
+        if not (finite and intervals.sum() <= FAILED_SLOWER * problem.start.duration) and \
+                current is problem.start and problem.drop_keep_outs():
+            # The start may break a keep-out round another port's mouth, and the solve
+            # that had to push it out failed: solve again with the port rule alone.
+            clearance = _clearance_samples(problem, *grid)
+            continue
+        if not finite:
             message = f'solver failed: {result.message}'
             break
         if intervals.sum() > FAILED_SLOWER * problem.start.duration:

@@ -9,8 +9,9 @@ points follow from v and its first two spans (the curve's velocity and accelerat
 are the path's at speed v), and v and tau are two more variables, tau in the objective.
 Rows g >= 0 (``solver_rows``): the
 velocity, acceleration (and jerk) control points, the wafer-centre acceleration at samples
-and the clearance of a body (or a port margin: the cell's ``motion_model``) at samples,
-all with exact Jacobians (compiled: ``rows``;
+and the clearance of a body (or a port margin: the cell's ``motion_model``, with a
+keep-out round the mouth of every port the curve neither leaves nor enters,
+``ShapeSettings.port_keep_out``) at samples, all with exact Jacobians (compiled: ``rows``;
 clearance from the closest points and the body Jacobian). ``shape.optimise_shape`` solves
 it.
 """
@@ -29,6 +30,9 @@ POSITION_MARGIN = 1e-6
 """rad: control points the optimiser moves stay this far inside the position limits, so
 that rounding in evaluating the curve never puts it beyond a limit (a point on the limit
 did, by 1e-16)."""
+KEEP_OUT_SAMPLES = 400
+"""Configurations of a start curve checked against the keep-outs round the ports' mouths
+(``breaks_keep_outs``)."""
 CLEARANCE_SCALE = 0.01
 """m: clearance rows are (d - kept) / this, of the order of the other rows."""
 
@@ -109,20 +113,43 @@ def refine(curve: CubicBSpline, spans: int) -> CubicBSpline:
     return CubicBSpline(knots, points)
 
 
+def keep_out_model(start: CubicBSpline, model, radius: float):
+    """
+    Return ``model`` with a disc of ``radius`` round other ports' mouths (the rows' model).
+
+    Round the mouth of every port ``start`` neither leaves nor enters
+    (``PortedModel.keeping_out``).
+    """
+    return model.keeping_out(radius, start.evaluate([0.0, start.duration]))
+
+
+def breaks_keep_outs(start: CubicBSpline, model, radius: float) -> bool:
+    """Return whether ``start`` comes within one of those discs, turned."""
+    kept = keep_out_model(start, model, radius)
+    return kept is not model and kept.port_model.breaks_keep_out(
+        start.evaluate(np.linspace(0.0, start.duration, KEEP_OUT_SAMPLES)))
+
+
 class ShapeProblem:
     """The whole-curve optimisation of one feasible start curve (see the module)."""
 
     def __init__(self, start: CubicBSpline, cell, shape: ShapeSettings,
                  timing: TimingSettings,
-                 ends: Sequence[Optional[FreeEnd]] = (None, None)):
+                 ends: Sequence[Optional[FreeEnd]] = (None, None), keep_out: bool = True):
         """
         Refine the start curve's knots and set up the problem for ``cell``'s robot.
 
         ``ends``: the start's and the goal's ``FreeEnd``, or None where the curve stops.
+        ``keep_out``: whether the rows keep the discs round the ports' mouths
+        (``keep_out_model``); if not, the port rule alone.
         """
         self.cell, self.settings, self.timing = cell, shape, timing
         self.robot, self.model = cell.robot, cell.motion_model
         self.start = refine(start, shape.min_spans)
+        self.row_model = keep_out_model(self.start, self.model, shape.port_keep_out) \
+            if keep_out else self.model
+        """The model the clearance rows keep: ``model`` (the proof's) with a keep-out round
+        the mouth of every port the curve neither leaves nor enters (``geometry.ports``)."""
         self.count = len(self.start.control_points)
         self.spans = self.count - DEGREE
         self._control_limits = self.robot.limits.rows(timing.margin)
@@ -149,6 +176,19 @@ class ShapeProblem:
             for m, index in enumerate(self._end_indices(k)[1:]):
                 self._raw_column[index] = self.variables + 6 * n + 3 * m + np.arange(3)
         self._raw_width = self.variables + 6 * len(self._free_ends)
+
+    def drop_keep_outs(self) -> bool:
+        """
+        Let the rows keep the port rule alone; return whether they kept keep-outs.
+
+        A start that passes turned nearer another port's mouth than its keep-out breaks
+        the rows from the outset; where the solve that must push it out fails, the rule
+        alone is solved instead.
+        """
+        if self.row_model is self.model:
+            return False
+        self.row_model = self.model
+        return True
 
     def _end_indices(self, k: int) -> tuple:
         """Return (P0, P1, P2) indices and the (h1, h2) span indices of end ``k``."""
@@ -274,7 +314,8 @@ class ShapeProblem:
         if len(span):
             q, q_h, q_p = sample_rows(padded, points, span, fraction, links,
                                       self._wafer_limits, True)
-            distance, gradient = self.model.body_clearance_gradient(np.ascontiguousarray(q.T))
+            distance, gradient = self.row_model.body_clearance_gradient(
+                np.ascontiguousarray(q.T))
             k = np.arange(len(span))
             distance, gradient = distance[k, body], gradient[k, body]      # (K,), (K, 3)
             by_h = np.einsum('ikd,ki->kd', q_h, gradient)
@@ -333,6 +374,6 @@ class ShapeProblem:
                 np.vstack([jacobian[:, :self.variables], extra]))
 
     def clearances(self, curve: CubicBSpline, span, fraction) -> np.ndarray:
-        """Return every body's clearance and port margin (K, 4 + 4P) at samples of a curve."""
+        """Return every body's clearance and port margin (K, 4 + 4P) that the rows keep."""
         times = curve.breaks()[span] + curve.intervals[span] * fraction
-        return self.model.body_clearance(curve.evaluate(times))
+        return self.row_model.body_clearance(curve.evaluate(times))

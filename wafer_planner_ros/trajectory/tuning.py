@@ -80,6 +80,16 @@ class ShapeSettings:
     port_kept: float = 0.25
     """The share of a port's lateral tolerance its margins keep at the samples (the proof
     then covers the curve between them; ``geometry.ports``)."""
+    port_keep_out: float = 0.02
+    """m: the rows keep the wafer centre this far from the mouth of every port the curve
+    neither leaves nor enters, where it is turned from that port's heading (a disc round
+    the tip of the port's wedge, ``geometry.ports``; the proof keeps the rule itself). On
+    the notched test cell an empty move from loadport1 into loadlock1 sweeps past
+    loadlock2's mouth with its blade turned; without the disc its optimum sat on the
+    wedge's tip, a corner the optimiser cut between its samples round after round. Where
+    the start already comes that near a mouth, turned, the coarse stage is also tried
+    under the rule alone (``methods.WholeCurve.finish``); within a time budget the rule
+    alone is kept throughout."""
     watch: float = 0.05
     """m: bodies this near a wall at a sample have their clearance constrained there."""
     max_rounds: int = 6
