@@ -179,6 +179,10 @@ def test_a_keep_out_round_another_ports_mouth_only_lowers_its_margins(default_ce
         starting, _at(default_cell, 'loadport2', -0.006, 0.0, 0.0)]))
     assert not kept.breaks_keep_out(np.stack([
         starting, _at(default_cell, 'loadport2', -0.03, 0.0, 0.3)]))
+    # No disc at all (radius 0): the rows' model is the proof's itself.
+    motion = default_cell.motion_model
+    assert motion.keeping_out(0.0, starting[None]) is motion
+    assert motion.keeping_out(0.02, starting[None]) is not motion
     with pytest.raises(ValueError, match='one radius >= 0 per port'):
         type(model)(model.arm, model.ports, [-0.01] * len(model.ports))
 

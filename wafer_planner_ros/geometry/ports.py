@@ -306,11 +306,11 @@ class PortedModel:
         """(4P,) m: the largest value of each port margin."""
 
     def keeping_out(self, radius: float, ends: np.ndarray) -> 'PortedModel':
-        """Return this model with ``PortModel.keeping_out``'s margins (the optimiser's)."""
-        if radius <= 0.0 or not len(self.port_model):
-            return self
-        return PortedModel(self.clearance_model, self.port_model.keeping_out(radius, ends),
-                           self._body_lipschitz)
+        """Return this model with ``PortModel.keeping_out``'s margins (itself if no disc)."""
+        kept = self.port_model.keeping_out(radius, ends)
+        if not np.any(kept.keep_out > 0.0):
+            return self  # no port but the curve's own: the rule alone
+        return PortedModel(self.clearance_model, kept, self._body_lipschitz)
 
     def body_clearance(self, q: np.ndarray) -> np.ndarray:
         """Return every body's clearance then every port margin (N, 4 + 4P), in m."""
