@@ -317,10 +317,12 @@ def test_a_coarse_optimum_the_proof_refutes_starts_the_fine_stage(roadmap_cache,
 
     The pillar cell, loaded, roadmap seed 0, loadport1 on the elbow-right branch to
     loadlock1 on the left (the transfer of the move between their insides): none of the
-    coarse stage's optima is proven. Started from the last of them, the fine stage proves
-    a curve no slower than the one it finds from the corridor curve, in about a third of
-    its iterations (52 against 150).
+    coarse stage's optima with four samples a span is proven (its tries with more are
+    left out here: this is what follows when they prove nothing either). Started from the
+    last of them, the fine stage proves a curve no slower than the one it finds from the
+    corridor curve, in about a third of its iterations (52 against 150).
     """
+    monkeypatch.setattr(methods, 'coarse_samples', lambda per_span, *_: per_span)
     cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'pillar.yaml')
     cached = load_or_build(cell, seed=0, cache_dir=roadmap_cache)
     planner = Planner(cell, cached.roadmap, PlannerSettings(method='whole-curve'))
@@ -343,6 +345,54 @@ def test_a_coarse_optimum_the_proof_refutes_starts_the_fine_stage(roadmap_cache,
     assert not cold.metrics['fine_from_unproven'] and 'coarse_cycle_time' not in cold.metrics
     assert warm.metrics['shape_iterations'] < 0.5 * cold.metrics['shape_iterations']
     assert warm.cycle_time <= 1.005 * cold.cycle_time
+
+
+def test_a_coarse_stage_is_tried_again_with_more_samples_only_when_it_proved_nothing(
+        default_cell, default_roadmap, monkeypatch):
+    tries = []
+    real = methods.optimise_shape
+
+    def recorded(start, cell, shape, *rest, **options):
+        shaped = real(start, cell, shape, *rest, **options)
+        if options.get('first_proven'):
+            tries.append((shape.min_spans, shape.clearance_samples,
+                          shaped is not None and shaped.trajectory is not None))
+        return shaped
+
+    monkeypatch.setattr(methods, 'optimise_shape', recorded)
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    for start, goal in station_pairs(default_cell)[:4]:
+        planner.plan(start, goal)
+    assert tries
+    for before, (spans, samples, _) in zip(tries, tries[1:]):
+        if samples > ShapeSettings().clearance_samples:
+            assert not before[2]   # a retry follows a try that proved nothing
+            assert spans in (before[0], 2 * before[0])
+
+
+def test_a_coarse_stage_that_proved_nothing_is_tried_again_but_not_within_a_budget(
+        default_cell, default_roadmap, monkeypatch):
+    samples = []
+    real = methods.optimise_shape
+    per_span = ShapeSettings().clearance_samples
+
+    def first_try_fails(start, cell, shape, *rest, **options):
+        if options.get('first_proven'):
+            samples.append(shape.clearance_samples)
+            if shape.clearance_samples == per_span:
+                return Shaping(None, False, 0, 1, shape.min_spans, 'no curve was proven')
+        return real(start, cell, shape, *rest, **options)
+
+    monkeypatch.setattr(methods, 'optimise_shape', first_try_fails)
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    budgeted = planner.plan('loadport2', 'loadlock2', branches=(1, 1), budget=0.12,
+                            deadline=time.monotonic() + 60.0)
+    assert samples and set(samples) == {per_span}
+    assert budgeted.verification.ok and 'coarse_cycle_time' not in budgeted.metrics
+    samples.clear()
+    result = planner.plan('loadport2', 'loadlock2', branches=(1, 1))
+    assert samples[0] == per_span and max(samples) > per_span
+    assert result.verification.ok and 'coarse_cycle_time' in result.metrics
 
 
 def test_the_fine_stage_never_returns_a_slower_curve_than_the_coarse_one(

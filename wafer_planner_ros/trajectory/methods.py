@@ -147,16 +147,19 @@ class WholeCurve(KnotTiming):
     ``ShapeSettings.coarse_spans`` spans (as many as the path has vertices where that is
     more) fitted to the corridor (``coarse``), then refines
     its optimum to as many spans as the corridor has (``ShapeSettings.min_spans`` at least)
-    and optimises that. When the coarse stage proves no curve, the fine one starts from its
-    last converged optimum (millimetres into a wall between its samples: the fine stage's
-    spans and samples prove it, or a curve near it, in a round or two), and, if that proves
-    nothing either, from the corridor curve with optimised knot times (``KnotTiming``:
-    feasible by construction), as it does for a curve that fails verification: the curve
-    returned is proven collision-free on its own (``proof``), not by the corridor. Within a
-    time budget (``until``) the coarse stage runs on past it to its first proven curve, up
-    to half-way to the request's ``deadline`` (``_past_budget``), and the fine stage stops
-    at the budget. The metrics say where the fine stage started: from the coarse stage's
-    proven curve (``coarse_cycle_time`` its cycle time), from its unproven optimum
+    and optimises that. When the coarse stage proves no curve, it is tried again with as
+    many clearance samples as the fine stage will have, then with twice the spans too
+    (``coarse_samples``; not within a time budget); when none proves a curve, the fine
+    stage starts from the last converged optimum (millimetres into a wall between its
+    samples: the fine stage's spans and samples prove it, or a curve near it, in a round
+    or two), and, if that proves nothing either, from the corridor curve with optimised
+    knot times (``KnotTiming``: feasible by construction), as it does for a curve that
+    fails verification: the curve returned is proven collision-free on its own
+    (``proof``), not by the corridor. Within a time budget (``until``) the coarse stage
+    runs on past it to its first proven curve, up to half-way to the request's
+    ``deadline`` (``_past_budget``), and the fine stage stops at the budget. The metrics
+    say where the fine stage started: from the coarse stage's proven curve
+    (``coarse_cycle_time`` its cycle time), from its unproven optimum
     (``fine_from_unproven``), or else from the corridor curve.
     """
 
@@ -177,10 +180,16 @@ class WholeCurve(KnotTiming):
         shape, spans = self.shape, max(self.shape.coarse_spans, len(corridor.path))
         fitted_start = coarse_start(corridor.control_points, spans, self.cell.robot,
                                     self.settings)
+        fine = replace(shape, min_spans=max(shape.min_spans,
+                                            len(corridor.control_points) - DEGREE))
 
-        def coarse_stage(keep_out: bool, rounds: int = shape.max_rounds) -> Optional[Shaping]:
+        def coarse_stage(keep_out: bool, rounds: int = shape.max_rounds, count: int = spans,
+                         samples: int = shape.clearance_samples) -> Optional[Shaping]:
             return optimise_shape(
-                fitted_start, self.cell, replace(shape, min_spans=spans, max_rounds=rounds),
+                fitted_start if count == spans else coarse_start(
+                    corridor.control_points, count, self.cell.robot, self.settings),
+                self.cell, replace(shape, min_spans=count, max_rounds=rounds,
+                                   clearance_samples=samples),
                 self.settings,
                 None if give_up_above is None else shape.coarse_give_up * give_up_above,
                 _past_budget(until, deadline), proven=False, first_proven=True,
@@ -198,6 +207,18 @@ class WholeCurve(KnotTiming):
             plain = coarse_stage(False, min(shape.max_rounds, PLAIN_ROUNDS))
             if _faster(plain, coarse):
                 coarse, keep_out = plain, False
+        for count in (spans, 2 * spans) if until is None else ():
+            # Nothing proven: between its samples an arm link may swing into a wall, and
+            # each round chase the last one's collision. Again with as many samples as the
+            # fine stage will have (``coarse_samples``), then also with twice the spans;
+            # not within a time budget (``coarse_samples``).
+            samples = coarse_samples(shape.clearance_samples, count, fine.min_spans)
+            if coarse is None or coarse.trajectory is not None or \
+                    samples <= shape.clearance_samples:
+                break
+            again = coarse_stage(keep_out, count=count, samples=samples)
+            if _faster(again, coarse):
+                coarse = again
         if coarse is None:
             return None  # its optimum is far slower than the best so far
         if coarse.trajectory is not None and coarse.trajectory.duration >= start.estimate:
@@ -205,8 +226,6 @@ class WholeCurve(KnotTiming):
         # The corridor curve is what is returned then: its timing may take longer than the
         # budget (its λ-scaled start is up to 10 x slower), up to half-way to the deadline.
         fitted = coarse.trajectory is not None
-        fine = replace(shape, min_spans=max(shape.min_spans,
-                                            len(corridor.control_points) - DEGREE))
         shaped = None
         if not fitted and coarse.unproven is not None:
             # Its last optimum lies millimetres into a wall between its samples: the fine
@@ -272,6 +291,25 @@ class WholeCurve(KnotTiming):
         return Shaped(shaped.trajectory, transfer.duration,
                       {'optimised': True, 'blend_iterations': shaped.iterations,
                        'blend_rounds': shaped.rounds, 'spans': shaped.spans})
+
+
+def coarse_samples(per_span: int, spans: int, fine_spans: int) -> int:
+    """
+    Return clearance samples per span of a coarse stage as dense in time as the fine one.
+
+    ``per_span`` samples on each of the fine stage's ``fine_spans`` spans, spread over the
+    coarse stage's ``spans``: the next tries of a coarse stage that proved nothing
+    (``WholeCurve.finish``). With ``per_span`` on each of its own spans, a coarse span is
+    several fine ones long, and an arm link can swing centimetres into a wall between
+    samples: each round added samples where the last curve was refuted, the next went in
+    elsewhere, nothing was proven, and the fine stage started from the corridor curve,
+    whose optimisation takes seconds more. As the first try they cost more than they
+    save: more rows in every subproblem, where a coarse stage usually proves its curve in
+    a round or two. Within a time budget they are not made: there the coarse stage already
+    runs past the budget to its first proven curve, and the tries would take the answer's
+    planning time to seconds (``doc/benchmark.md``: the coarse stage tried again).
+    """
+    return max(per_span, math.ceil(per_span * fine_spans / spans))
 
 
 def _keeps_out(until: Optional[float], deadline: Optional[float]) -> bool:
