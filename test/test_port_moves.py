@@ -245,13 +245,13 @@ def test_a_move_round_a_notch_blends_into_both_ports(roadmap_cache, seed):
 @pytest.mark.slow
 def test_a_transfer_round_a_pillar_is_proven_by_its_coarse_stage(roadmap_cache):
     """
-    The coarse stage samples clearance as densely in time as the fine stage does.
+    A coarse stage that proves nothing is tried again, with more clearance samples.
 
     The pillar cell, roadmap seed 1, empty, loadport1:inside -> loadlock1:inside, the elbow
-    flipped on the way: with four clearance samples on each of its ten coarse spans, an arm
-    link swung 5 cm into a wall between samples, each round chased the last one's
+    flipped on the way: with four clearance samples on each of its eight coarse spans, an
+    arm link swung 5 cm into a wall between samples, each round chased the last one's
     collision, and the coarse stage proved nothing in six rounds; the fine stage then
-    started from the corridor curve (13 s to plan, 3.718 s, where 3.647 s is found).
+    started from the corridor curve (13 s to plan, 3.718 s, where 3.652 s is found).
     """
     cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'pillar.yaml')
     cached = load_or_build(cell, seed=1, cache_dir=roadmap_cache)
