@@ -11,7 +11,7 @@ from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.moves.channel import Channel, channel_bounds
 from wafer_planner_ros.moves.timing import profile
-from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.planner import candidates, Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
@@ -175,18 +175,18 @@ def test_a_move_through_the_ports_takes_the_transfer_its_station_pair_finished(
     pair = planner.plan('loadport1', 'loadlock2')
     assert pair.branches != branches and pair.metrics['candidates'] == 4
     planned, verified = [], []
-    real_planned, real_verified = Planner._planned, Planner._verified
+    real_planned, real_verified = Planner._planned, candidates.verified
 
     def spy_planned(self, a, b, *rest):
         planned.append((a.label, b.label))
         return real_planned(self, a, b, *rest)
 
-    def spy_verified(self, candidate, stage_ms):
+    def spy_verified(planner, candidate, stage_ms):
         verified.append(candidate.pair.branches)
-        return real_verified(self, candidate, stage_ms)
+        return real_verified(planner, candidate, stage_ms)
 
     monkeypatch.setattr(Planner, '_planned', spy_planned)
-    monkeypatch.setattr(Planner, '_verified', spy_verified)
+    monkeypatch.setattr(candidates, 'verified', spy_verified)
     result = planner.plan(start, goal, branches=branches)
     # The transfer between the mouths was not planned again: verified, then blended.
     assert planned == [(start, goal)] and verified == [branches]
@@ -199,11 +199,11 @@ def test_a_move_through_the_ports_takes_the_transfer_its_station_pair_finished(
     planner.plan('loadport1', 'loadlock2')
     refused = []
 
-    def failing(self, candidate, stage_ms):
+    def failing(planner, candidate, stage_ms):
         refused.append(candidate.pair.branches)
         raise PlanningError(ErrorCode.VERIFICATION_FAILED, 'refused by the test')
 
-    monkeypatch.setattr(Planner, '_verified', failing)
+    monkeypatch.setattr(candidates, 'verified', failing)
     monkeypatch.setattr(Planner, '_planned', spy_planned)
     planned.clear()
     with pytest.raises(PlanningError):

@@ -19,6 +19,7 @@ from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service import table as table_module
+from wafer_planner_ros.service.adoption import adopted
 from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_and_store_table, inherited_table
@@ -452,10 +453,10 @@ def test_a_donor_tables_faster_curve_is_taken_only_when_it_verifies(planner, def
         answer = kept.answer(planner, *pair)
         assert 'adopted' not in answer.metrics and answer.load == LOADED
         assert answer.cycle_time > fast.answer(planner, *pair).cycle_time
-        assert planner.adopted(fast.answer(planner, *pair)) is None
+        assert adopted(planner, fast.answer(planner, *pair)) is None
     # Adopted backwards: from the other's goal to its start, on its branches reversed.
     there = planner.plan(*pairs[0])
-    back = planner.for_load(EMPTY).adopted(there, backwards=True)
+    back = adopted(planner.for_load(EMPTY), there, backwards=True)
     assert (back.start.label, back.goal.label) == pairs[1] and back.load == EMPTY
     assert back.branches == there.branches[::-1] and back.metrics['reversed']
     assert np.array_equal(back.positions[0], there.goal_q)

@@ -19,6 +19,11 @@ INSIDE = ':inside'
 """The suffix naming a station's pick/place pose inside its port, e.g. 'loadport1:inside'."""
 
 
+def station_name(end: str) -> str:
+    """Return the station a request's end names: ``loadport1`` of ``loadport1:inside``."""
+    return end[:-len(INSIDE)] if end.endswith(INSIDE) else end
+
+
 @dataclass(frozen=True, eq=False)
 class Station:
     """A named place the wafer is picked from or put down at, resolved to joint angles."""

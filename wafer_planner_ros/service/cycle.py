@@ -8,7 +8,7 @@ move (``Planner.plan``): non-stop, unless stopping at the port mouths is faster 
 ``stops``); the way back is planned on the elbow branches the way out
 ended and started on, so that the cycle repeats. When the way out backwards is faster than
 the way back as planned and passes the empty set's verification, it is the way back
-(``Planner.faster``; the optimiser is local, and the empty set allows all the loaded one
+(``adoption.faster``; the optimiser is local, and the empty set allows all the loaded one
 does).
 
 It is compared with the same cycle as a controller without non-stop moves or an empty
@@ -30,6 +30,7 @@ from wafer_planner_ros.cell.limits import EMPTY, LOADED
 from wafer_planner_ros.cell.stations import INSIDE
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlanResult
+from wafer_planner_ros.service.adoption import faster
 
 SECONDS_PER_HOUR = 3600.0
 
@@ -132,15 +133,16 @@ def swap_cycle(planner: Planner, loadport: str, loadlock: str,
 
 
 def loadport_loadlock_pairs(cell) -> list:
-    """Return every (loadport, loadlock) pair of stations with a port, by name."""
+    """Return every (loadport, loadlock) pair of stations with a port (by role), by name."""
     names = sorted(name for name, station in cell.stations.items() if station.port)
+    role = {name: cell.stations[name].role for name in names}
     return [(a, b) for a in names for b in names
-            if a.startswith('loadport') and b.startswith('loadlock')]
+            if role[a] == 'loadport' and role[b] == 'loadlock']
 
 
 def _faster(planner: Planner, back: Move, out: Move) -> Move:
     """Return the way back, or the way out backwards if faster and it verifies for it."""
-    result = planner.for_load(back.load).faster(back.result, out.result, backwards=True)
+    result = faster(planner.for_load(back.load), back.result, out.result, backwards=True)
     return back if result is back.result else replace(back, result=result, error='')
 
 

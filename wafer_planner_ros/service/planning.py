@@ -32,7 +32,7 @@ import time
 from typing import Dict, Mapping, Optional, Type
 
 from wafer_planner_ros.cell.limits import LOADED
-from wafer_planner_ros.cell.stations import INSIDE
+from wafer_planner_ros.cell.stations import INSIDE, station_name
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.service.table import StationTable
 from wafer_planner_ros.trajectory.methods import CurveMethod, KnotTiming, WholeCurve
@@ -134,8 +134,7 @@ class PlanningService:
         if not (isinstance(start, str) and isinstance(goal, str)) or not (
                 start.endswith(INSIDE) or goal.endswith(INSIDE)):
             return
-        pair = tuple(name[:-len(INSIDE)] if name.endswith(INSIDE) else name
-                     for name in (start, goal))
+        pair = tuple(station_name(name) for name in (start, goal))
         table = self._holding(*pair, load)
         if table is not None:
             planner = whole_curve(self.planner).for_load(load)

@@ -56,6 +56,7 @@ from wafer_planner_ros.cell.limits import LOADED
 from wafer_planner_ros.cell.stations import INSIDE, station_pairs
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import path_lengths, Planner, PlanResult
+from wafer_planner_ros.service.adoption import faster
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.verify import Verification, verify
@@ -203,7 +204,7 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
     the pairs it rejected or lacks are planned; its entries and failures are kept. Given
     the table of another limit set, ``donor`` (the loaded moves' for the empty ones), its
     curve of a pair is taken instead when it is faster than the one planned and passes
-    this planner's verification (``Planner.faster``).
+    this planner's verification (``adoption.faster``).
     """
     begun = time.perf_counter()
     entries = dict(loaded.entries) if loaded is not None else {}
@@ -222,7 +223,7 @@ def build_table(planner: Planner, progress: Optional[Callable[[int, int, str], N
             if back is None:
                 result = planner.plan(start, goal)
                 if donor is not None and pair in donor.entries:
-                    result = planner.faster(result, donor.answer(planner, start, goal))
+                    result = faster(planner, result, donor.answer(planner, start, goal))
                 entries[pair], verified[pair] = _entry(result), result.verification
             else:
                 entries[pair], verified[pair] = _reversed(planner, pair, back)
