@@ -112,6 +112,10 @@ def test_joint_request_in_any_joint_order(harness, default_cell):
      'INVALID_REQUEST'),
     ('stations', 'b22', {'id': 'b22', 'from': 'p' * 60000, 'to': 'loadlock1'},
      'INVALID_REQUEST'),
+    # Too long, or too deep, to read: answered under the id it starts with.
+    ('stations', 'b24', {'id': 'b24', 'from': 'p' * 70000, 'to': 'loadlock1'},
+     'INVALID_REQUEST'),
+    ('raw', 'b25', '{"id": "b25", "from": ' + '[' * 60000, 'INVALID_REQUEST'),
     ('raw', '', '{"id": "\\ud800", "from": "loadport1", "to": "loadlock1"}',
      'INVALID_REQUEST'),
     ('joints', 'b23', ([1e308, 0.0, 0.0], [0.1, 0.2, 0.3]), 'OUT_OF_LIMITS'),

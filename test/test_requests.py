@@ -61,7 +61,12 @@ def test_the_largest_numbers_a_float_holds_are_read():
 
 @pytest.mark.parametrize('text, request_id, says', [
     ('[' * 60000, '', 'not JSON'),
-    ('{"id": "x", "from": ' + '[' * 60000, '', 'not JSON'),
+    # Too deep to read: the id it starts with is read all the same.
+    ('{"id": "x", "from": ' + '[' * 60000, 'x', 'not JSON'),
+    ('{"from": "a", "id": "x", "to": ' + '[' * 60000, '', 'not JSON'),
+    ('{"id": "x\\u00e9\\"", "from": ' + '[' * 60000, 'x\u00e9"', 'not JSON'),
+    ('{"id": "\\ud800", "from": ' + '[' * 60000, '', 'not JSON'),
+    ('{"id": ' + json.dumps('i' * (MAX_ID + 1)) + ', "from": ' + '[' * 60000, '', 'not JSON'),
     ('{"id": "x", "from": ' + '[' * 900 + ']' * 900 + ', "to": "a"}', 'x',
      '"from" must be a station name or a list of joint angles, got [[[[[[[[[...]]]]]]]]]'),
     (_station('"a"', '1' + '0' * 5000), '', 'needs a non-empty string "id", got (5001 digits)'),
@@ -86,6 +91,9 @@ def test_the_largest_numbers_a_float_holds_are_read():
     (_station('{"q": [1, 2, 3]}'), 'x', 'got {"q": [1, 2, 3]}'),
     (_station('[' + ', '.join(['"q"'] * 10000) + ']'), 'x', 'got ["q", "q", "q"'),
     ('x' * 70000, '', 'the request is 70000 characters long'),
+    ('{"id": "r7", "from": "' + 'x' * 70000 + '"}', 'r7', 'the request is 70024 characters long'),
+    (' \n{ "id" :"' + 'i' * MAX_ID + '", "from": "' + 'x' * 70000, 'i' * MAX_ID,
+     'characters long'),
 ])
 def test_a_malformed_station_request_is_invalid_with_a_bounded_message(text, request_id, says):
     error = _refused(text)

@@ -17,6 +17,7 @@ values themselves (limits, collision, known station).
 from dataclasses import dataclass
 import json
 import math
+import re
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -34,6 +35,9 @@ QUOTE = 200
 """Most characters of a request's value that an error message quotes."""
 KEYS = ('id', 'from', 'to', 'load')
 """The keys of a station request (``load`` optional)."""
+LEADING_ID = re.compile(r'\s*\{\s*"id"\s*:\s*("(?:[^"\\\x00-\x1f]|\\.){1,%d}")' % MAX_ID)
+"""A request text's id when it is the first key, read without reading the rest: its string
+literal (each character, or escape, of at most ``MAX_ID``)."""
 
 End = Union[str, np.ndarray]
 
@@ -93,6 +97,22 @@ def request_id_of(value) -> str:
     return value
 
 
+def leading_id(text: str) -> str:
+    """
+    Return the id a station request's text starts with, '' when it does not start with one.
+
+    For a request too long or too deeply nested to read whole: its answer still carries
+    the id its sender waits for, when ``"id"`` is its first key and a usable id.
+    """
+    found = LEADING_ID.match(text)
+    if found is None:
+        return ''
+    try:
+        return request_id_of(json.loads(found.group(1)))
+    except (ValueError, RequestError):
+        return ''
+
+
 def joint_request(request_id: str, joint_names: Sequence[str],
                   positions: Sequence[Sequence[float]], robot_joints: Sequence[str]) -> Request:
     """Return the request of a JointTrajectory's id, joint names and points' positions."""
@@ -142,7 +162,8 @@ def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
     """Return the request of a station request's JSON text (see ``request_of``)."""
     if len(text) > MAX_TEXT:
         raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'the request is {len(text)} characters long; at most {MAX_TEXT}')
+                           f'the request is {len(text)} characters long; at most {MAX_TEXT}',
+                           leading_id(text))
     try:
         # Numbers no float holds become markers (NOT_FINITE below, naming the field) rather
         # than raising (an integer of over 4300 digits) or overflowing later.
@@ -150,7 +171,8 @@ def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
                           parse_constant=_NotFinite, object_pairs_hook=_Object)
     except (ValueError, RecursionError, MemoryError) as exc:
         raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'the request is not JSON ({str(exc)[:QUOTE]})') from None
+                           f'the request is not JSON ({str(exc)[:QUOTE]})',
+                           leading_id(text)) from None
     if not isinstance(data, dict):
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request must be a JSON object, got {quote(data)}')
