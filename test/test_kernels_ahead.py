@@ -136,7 +136,7 @@ def test_the_polygon_kernels_are_left_to_numba_and_the_rest_built():
     left_names = {k.__qualname__ for k in left}
     # They reach the exact orientation test's Python slow path (objmode).
     assert {'orient', '_inside', '_first_intersection'} <= left_names
-    assert {'knots_from_intervals', 'sample_rows', '_astar', '_spine_distances'} <= {
+    assert {'knots_from_intervals', 'wafer_rows', '_astar', '_spine_distances'} <= {
         k.__qualname__ for k in built}
 
 

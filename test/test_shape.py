@@ -24,9 +24,10 @@ from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.trajectory import methods, shape as shape_module, sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.coarse import coarse_start, fitted_points
+from wafer_planner_ros.trajectory.constraints import CLEARANCE_SCALE
 from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape import _clearance_samples, optimise_shape, Shaping
-from wafer_planner_ros.trajectory.shape_problem import CLEARANCE_SCALE, refine, ShapeProblem
+from wafer_planner_ros.trajectory.shape_problem import refine, ShapeProblem
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 

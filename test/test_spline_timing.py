@@ -11,13 +11,15 @@ from wafer_planner_ros.roadmap.search import find_path
 from wafer_planner_ros.roadmap.shortcut import shortcut
 from wafer_planner_ros.trajectory import timing as timing_module
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
+from wafer_planner_ros.trajectory.constraints import limit_constraints, ratio_orders
+from wafer_planner_ros.trajectory.constraints import state_ratios, States
 from wafer_planner_ros.trajectory.corridor import build_corridor, simplify
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import TimingSettings
-from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times, LIMIT_ORDERS
-from wafer_planner_ros.trajectory.verify import limit_ratios, state_ratios, verify
+from wafer_planner_ros.trajectory.verify import COLLISION_STEP, collision_times
+from wafer_planner_ros.trajectory.verify import limit_ratios, verify
 
 MARGIN = TimingSettings().margin
 """The optimiser's tightening of the limits (its default tuning)."""
@@ -220,15 +222,18 @@ def test_each_limit_ratio_scales_with_its_order_in_time(default_cell, spline):
     robot = default_cell.robot  # every limit
     robot = robot.with_limit_set(replace(robot.limit_set,
                                          wafer=replace(robot.wafer_limit, norm=3.0)))
-    assert set(limit_ratios(spline, robot)) == set(LIMIT_ORDERS)
+    constraints = limit_constraints(robot.limit_set)
+    orders = ratio_orders(constraints)
+    assert set(limit_ratios(spline, robot)) == set(orders)
     slower = 1.7
     slowed = CubicBSpline.from_intervals(spline.control_points, slower * spline.intervals)
     # The same instants of both curves (none on a knot, where the jerk steps).
     t = np.random.default_rng(74).uniform(0.0, spline.duration, 500)
-    ratios = [state_ratios(robot, *states[1:], robot.arm.wafer_acceleration(*states[:3]))
+    ratios = [state_ratios(constraints, States(t, *states,
+                                               robot.arm.wafer_acceleration(*states[:3])))
               for states in (spline.evaluate_orders(t, range(4)),
                              slowed.evaluate_orders(slower * t, range(4)))]
-    for name, order in LIMIT_ORDERS.items():
+    for name, order in orders.items():
         assert ratios[1][name] == pytest.approx(ratios[0][name] / slower ** order, rel=1e-9)
 
 

@@ -4,14 +4,13 @@ Named limit sets: what a motion may not exceed with a wafer on the blade, or wit
 A cell has two: ``loaded`` (the joint limits and the wafer limit, the acceleration at
 which friction stops holding the wafer on the blade) and ``empty`` (joint limits only, the
 loaded ones unless the cell file raises them: with no wafer on the blade nothing slides).
-A motion is planned and verified against one set. Each limit gives the optimisers its rows
-(``rows``: the bounds the constraint kernels take, with the optimisers' margin) and the
-verification its check (``ratios``: the largest |value| / limit over the states checked),
-so that what the optimiser keeps and what the verification checks are one definition.
+A motion is planned and verified against one set. These are the values the cell file
+gives; what each limit means to the optimisers and the verification (its rows, its check)
+is its constraint object (``trajectory.constraints``), made from a set.
 """
 
 from dataclasses import dataclass
-from typing import Dict, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -35,19 +34,15 @@ class JointLimits:
     jerk: Optional[np.ndarray] = None
     """(3,) rad/s^3, optional."""
 
-    def rows(self, margin: float) -> np.ndarray:
-        """Return the bounds of the control-point rows: velocity, acceleration (, jerk)."""
-        orders = [self.velocity, self.acceleration] + (
-            [self.jerk] if self.jerk is not None else [])
-        return margin * np.array(orders, float)
+    def outside(self, q) -> np.ndarray:
+        """
+        Return the joints outside their position limits in any configuration of ``q``.
 
-    def ratios(self, qd: np.ndarray, qdd: np.ndarray, qddd: np.ndarray) -> Dict[str, float]:
-        """Return the largest |value| / limit of velocity, acceleration (, jerk)."""
-        ratios = {'velocity': _ratio(qd, self.velocity),
-                  'acceleration': _ratio(qdd, self.acceleration)}
-        if self.jerk is not None:
-            ratios['jerk'] = _ratio(qddd, self.jerk)
-        return ratios
+        ``q``: (3,) or (K, 3); a value that is not a number is outside.
+        """
+        lower, upper = self.position.T
+        q = np.atleast_2d(np.asarray(q, float))
+        return np.nonzero(np.any(~((q >= lower) & (q <= upper)), axis=0))[0]
 
     def shortest_motion(self, displacement) -> np.ndarray:
         """
@@ -93,26 +88,6 @@ class WaferLimit:
         """Return the limits: x, y (, |a|) (m/s^2)."""
         return self.xy if self.norm is None else np.append(self.xy, self.norm)
 
-    def rows(self, margin: float) -> np.ndarray:
-        """Return the bounds the wafer-sample rows take: x, y, |a| (0: no |a| row)."""
-        return margin * np.array([self.xy[0], self.xy[1], self.norm or 0.0])
-
-    def ratio(self, ax: np.ndarray, ay: np.ndarray) -> np.ndarray:
-        """Return the worst |value| / limit of x, y (, |a|) at each sample."""
-        ratio = np.maximum(np.abs(ax) / self.xy[0], np.abs(ay) / self.xy[1])
-        if self.norm is not None:
-            ratio = np.maximum(ratio, np.hypot(ax, ay) / self.norm)
-        return ratio
-
-    def ratios(self, wafer: np.ndarray) -> Dict[str, float]:
-        """Return the largest |value| / limit on x, y (, |a|) of accelerations (K, 2)."""
-        ratios = {'wafer_x': _ratio(wafer[:, 0], self.xy[0]),
-                  'wafer_y': _ratio(wafer[:, 1], self.xy[1])}
-        if self.norm is not None:
-            ratios['wafer_norm'] = float(np.max(np.hypot(wafer[:, 0], wafer[:, 1]),
-                                                initial=0.0) / self.norm)
-        return ratios
-
 
 @dataclass(frozen=True, eq=False)
 class LimitSet:
@@ -123,18 +98,3 @@ class LimitSet:
     joints: JointLimits
     wafer: Optional[WaferLimit]
     """None: no wafer on the blade, no wafer limit."""
-
-    def ratios(self, qd, qdd, qddd, wafer: np.ndarray) -> Dict[str, float]:
-        """Return the largest |value| / limit of each limit over states (``verify``)."""
-        ratios = self.joints.ratios(qd, qdd, qddd)
-        if self.wafer is not None:
-            ratios.update(self.wafer.ratios(wafer))
-        return ratios
-
-    def wafer_ratio(self, ax: np.ndarray, ay: np.ndarray) -> np.ndarray:
-        """Return the worst wafer ratio at each sample (zeros without a wafer limit)."""
-        return np.zeros(np.shape(ax)) if self.wafer is None else self.wafer.ratio(ax, ay)
-
-
-def _ratio(values: np.ndarray, limit) -> float:
-    return float(np.max(np.abs(values) / limit, initial=0.0))

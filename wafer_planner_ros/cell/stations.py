@@ -61,10 +61,9 @@ def _station(name: str, value, robot: Robot, model: ClearanceModel) -> Station:
         schema.mapping(value, path, required=('joints',), optional=('port',))
         q = schema.vector(value['joints'], f'{path}.joints', 3)
         lower, upper = robot.limits.position.T
-        for i in range(3):
-            if not lower[i] <= q[i] <= upper[i]:
-                raise CellError(f'{path}.joints[{i}]',
-                                f'{q[i]} is outside the joint limits [{lower[i]}, {upper[i]}]')
+        for i in robot.limits.outside(q)[:1]:
+            raise CellError(f'{path}.joints[{i}]',
+                            f'{q[i]} is outside the joint limits [{lower[i]}, {upper[i]}]')
         candidates = [IkSolution(elbow=1 if q[1] >= 0 else -1, q=q)]
         spec = {'joints': q.tolist()}
     else:
@@ -146,11 +145,10 @@ def _channel_problem(port: Port, start_q, robot: Robot, model: ClearanceModel):
     """Return why the channel from ``start_q`` is not usable (see ``_channels``), or None."""
     s = np.linspace(0.0, port.depth, int(np.ceil(port.depth / CHANNEL_STEP)) + 1)
     q = port.channel(robot.arm, start_q, s)
-    lower, upper = robot.limits.position.T
     for k in range(len(s)):
         if not np.all(np.isfinite(q[k])):
             return f'out of reach {s[k]:.3f} m into the port'
-        if np.any((q[k] < lower) | (q[k] > upper)):
+        if len(robot.limits.outside(q[k])):
             return (f'beyond robot.joint_limits.position {s[k]:.3f} m into the port '
                     f'({q[k].round(4).tolist()})')
     clearance = model.body_clearance(q)
@@ -169,7 +167,7 @@ def _channel_problem(port: Port, start_q, robot: Robot, model: ClearanceModel):
         a, b, da, db, qa, qb = (x[open_] for x in (a, b, da, db, qa, qb))
         middle = 0.5 * (a + b)
         qm = port.configurations(robot.arm, middle, start_q[1], near=qa)
-        if np.any((qm < lower) | (qm > upper)) or not np.all(np.isfinite(qm)):
+        if len(robot.limits.outside(qm)):  # a value out of reach is not a number
             return f'beyond robot.joint_limits.position near {middle[0]:.3f} m into the port'
         dm = model.body_clearance(qm)
         a, b = np.concatenate([a, middle]), np.concatenate([middle, b])

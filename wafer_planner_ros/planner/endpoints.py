@@ -73,7 +73,7 @@ def endpoint(cell, value, role: str) -> Endpoint:
     if not np.all(np.isfinite(q)):
         raise PlanningError(ErrorCode.NOT_FINITE, f'{role} {q.tolist()} is not finite')
     lower, upper = robot.limits.position.T
-    for j in np.nonzero((q < lower) | (q > upper))[0]:
+    for j in robot.limits.outside(q)[:1]:
         raise PlanningError(ErrorCode.OUT_OF_LIMITS,
                             f'{role} joint {robot.joint_names[j]} = {q[j]} rad is outside '
                             f'[{lower[j]}, {upper[j]}]')
@@ -158,9 +158,8 @@ def _channel_of(cell, q: np.ndarray, role: str) -> Optional[Channel]:
         # mouth's inverse kinematics, not exactly at q.
         return None
     channel = Channel.out_of(robot.arm, q, port.axis, length)
-    lower, upper = robot.limits.position.T
     along = channel.configurations(np.linspace(0.0, length, CHANNEL_CHECKS))
-    if not np.all((along >= lower) & (along <= upper)):
+    if len(robot.limits.outside(along)):
         raise PlanningError(ErrorCode.OUT_OF_LIMITS,
                             f'{role} {q.tolist()} is inside the port of {port.station}, '
                             f'whose way out on its elbow branch (to '

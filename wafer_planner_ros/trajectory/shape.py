@@ -42,7 +42,7 @@ import numpy as np
 from wafer_planner_ros.trajectory import sqp
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.proof import prove
-from wafer_planner_ros.trajectory.shape_problem import FreeEnd, inner_limits, ShapeProblem
+from wafer_planner_ros.trajectory.shape_problem import FreeEnd, ShapeProblem
 from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import peaks_over, single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
@@ -110,7 +110,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     around = (np.arange(shape.clearance_samples) + 0.5) / shape.clearance_samples
     grid = (np.repeat(np.arange(spans), len(around)), np.tile(around, spans))
     clearance = _clearance_samples(problem, *grid)
-    lower, upper = inner_limits(cell.robot)
+    lower, upper = problem.positions.inner
     iterations, message, unproven = 0, '', None
     for rounds in range(1, shape.max_rounds + 1):
         if deadline is not None and time.monotonic() >= deadline:
@@ -292,7 +292,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     """
     Run SLSQP's method (``sqp``) from ``start``: durations relative to the start's.
 
-    The free control points are bounded by the position limits, ``POSITION_MARGIN``
+    The free control points are bounded by the position limits, ``PositionBound.margin``
     inside (the QP's simple bounds: bounding only those near a limit and the rest when
     they crossed one took 1.4 x as long over the default cell's station pairs, solving
     some rounds twice); at ``deadline`` (``time.monotonic()``) it stops where it is. Rows
@@ -323,7 +323,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
             values, jacobian = problem.rows(x, wafer, clearance, scale)
             return values[keep] * weights, jacobian[keep] * weights[:, None]
 
-    lb, ub = problem.bounds(*inner_limits(problem.robot), scale)
+    lb, ub = problem.bounds(*problem.positions.inner, scale)
     objective = problem.objective(scale)
     result = sqp.solve(linearised, objective, x0, lb, ub,
                        max_iterations=problem.settings.max_iterations,

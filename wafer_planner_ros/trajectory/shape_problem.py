@@ -22,25 +22,14 @@ from typing import Callable, Optional, Sequence, Tuple
 import numpy as np
 
 from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
-from wafer_planner_ros.trajectory.rows import control_row_count, control_rows, sample_rows
-from wafer_planner_ros.trajectory.rows import scatter_rows
+from wafer_planner_ros.trajectory.constraints import ClearanceBound, joint_bounds
+from wafer_planner_ros.trajectory.constraints import limit_constraints, position_bound
+from wafer_planner_ros.trajectory.constraints import wafer_bound
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
-POSITION_MARGIN = 1e-6
-"""rad: control points the optimiser moves stay this far inside the position limits, so
-that rounding in evaluating the curve never puts it beyond a limit (a point on the limit
-did, by 1e-16)."""
 KEEP_OUT_SAMPLES = 400
 """Configurations of a start curve checked against the keep-outs round the ports' mouths
 (``breaks_keep_outs``)."""
-CLEARANCE_SCALE = 0.01
-"""m: clearance rows are (d - kept) / this, of the order of the other rows."""
-
-
-def inner_limits(robot) -> tuple:
-    """Return the position limits, ``POSITION_MARGIN`` inside, that moved control points keep."""
-    lower, upper = robot.limits.position.T
-    return lower + POSITION_MARGIN, upper - POSITION_MARGIN
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,28 +124,33 @@ class ShapeProblem:
 
     def __init__(self, start: CubicBSpline, cell, shape: ShapeSettings,
                  timing: TimingSettings,
-                 ends: Sequence[Optional[FreeEnd]] = (None, None), keep_out: bool = True):
+                 ends: Sequence[Optional[FreeEnd]] = (None, None), keep_out: bool = True,
+                 constraints=None):
         """
         Refine the start curve's knots and set up the problem for ``cell``'s robot.
 
         ``ends``: the start's and the goal's ``FreeEnd``, or None where the curve stops.
         ``keep_out``: whether the rows keep the discs round the ports' mouths
-        (``keep_out_model``); if not, the port rule alone.
+        (``keep_out_model``); if not, the port rule alone. ``constraints``: the limits
+        kept (default: those of the robot's set in use with the timing's margin).
         """
         self.cell, self.settings, self.timing = cell, shape, timing
         self.robot, self.model = cell.robot, cell.motion_model
         self.start = refine(start, shape.min_spans)
-        self.row_model = keep_out_model(self.start, self.model, shape.port_keep_out) \
-            if keep_out else self.model
-        """The model the clearance rows keep: ``model`` (the proof's) with a keep-out round
+        self.clearance = ClearanceBound(
+            keep_out_model(self.start, self.model, shape.port_keep_out) if keep_out
+            else self.model)
+        """The clearance the rows keep: of ``model`` (the proof's) with a keep-out round
         the mouth of every port the curve neither leaves nor enters (``geometry.ports``)."""
         self.count = len(self.start.control_points)
         self.spans = self.count - DEGREE
-        self._control_limits = self.robot.limits.rows(timing.margin)
-        wafer = self.robot.wafer_limit
-        self.wafer_limited = wafer is not None
-        """Whether the wafer limit applies (loaded): if not, wafer samples have no rows."""
-        self._wafer_limits = wafer.rows(timing.margin) if wafer else np.zeros(3)
+        self.limits_kept = limit_constraints(self.robot.limit_set, timing.margin) \
+            if constraints is None else list(constraints)
+        """The limits the rows keep (``trajectory.constraints``), then the clearance."""
+        self._joints = joint_bounds(self.limits_kept)
+        self.wafer = wafer_bound(self.limits_kept)
+        """The wafer limit (loaded), or None: then wafer samples have no rows."""
+        self.positions = position_bound(self.limits_kept)
         self.min_interval = timing.shortest(self.robot)
         self.fixed = np.zeros(self.count, dtype=bool)
         self.fixed[:DEGREE] = self.fixed[-DEGREE:] = True
@@ -185,9 +179,9 @@ class ShapeProblem:
         the rows from the outset; where the solve that must push it out fails, the rule
         alone is solved instead.
         """
-        if self.row_model is self.model:
+        if self.clearance.model is self.model:
             return False
-        self.row_model = self.model
+        self.clearance = ClearanceBound(self.model)
         return True
 
     def _end_indices(self, k: int) -> tuple:
@@ -286,7 +280,8 @@ class ShapeProblem:
 
         Rows: the control points' (``rows.control_rows``), the wafer acceleration at the
         ``wafer`` (span, fraction) samples, then the clearance at the ``clearance``
-        (span, fraction, body, kept) samples: (d - kept) / CLEARANCE_SCALE, by the body
+        (span, fraction, body, kept) samples (``ClearanceBound``): (d - kept) / scale, by
+        the body
         Jacobian through the basis weights; then tau - time(v) >= 0 per free end, ``taus``
         its tau. Columns as ``pack``: the free control points' coordinates, the durations
         relative to ``scale``, (v, tau) per free end.
@@ -296,33 +291,23 @@ class ShapeProblem:
         scale = np.ascontiguousarray(scale, float)
         padded = np.concatenate([np.zeros(DEGREE), intervals, np.zeros(DEGREE)])
         (wafer_span, wafer_fraction), (span, fraction, body, kept) = wafer, clearance
-        if not self.wafer_limited:
+        if self.wafer is None:
             wafer_span = wafer_span[:0]
-        parts = 3 if self._wafer_limits[2] > 0.0 else 2
-        control = control_row_count(self.count, len(self._control_limits))
-        rows = control + parts * len(wafer_span) + len(span)
+        rows = sum(bound.row_count(self.count) for bound in self._joints) + len(span) + (
+            0 if self.wafer is None else self.wafer.parts * len(wafer_span))
         values = np.empty(rows)
         jacobian = np.zeros((rows, self._raw_width))
         columns = (self._raw_column, self._duration_column, scale)
-        row = control_rows(points, intervals, self._control_limits, *columns, values, jacobian)
-        links = np.asarray(self.robot.arm.link_lengths, float)
+        row = 0
+        for bound in self._joints:
+            row = bound.write_rows(points, intervals, columns, values, jacobian, row)
         if len(wafer_span):
-            local = sample_rows(padded, points, wafer_span, wafer_fraction, links,
-                                self._wafer_limits, False)
-            scatter_rows(jacobian, values, row, *local, wafer_span, *columns)
-            row += parts * len(wafer_span)
+            row = self.wafer.write_rows(padded, points, wafer_span, wafer_fraction,
+                                        np.asarray(self.robot.arm.link_lengths, float),
+                                        columns, values, jacobian, row)
         if len(span):
-            q, q_h, q_p = sample_rows(padded, points, span, fraction, links,
-                                      self._wafer_limits, True)
-            distance, gradient = self.row_model.body_clearance_gradient(
-                np.ascontiguousarray(q.T))
-            k = np.arange(len(span))
-            distance, gradient = distance[k, body], gradient[k, body]      # (K,), (K, 3)
-            by_h = np.einsum('ikd,ki->kd', q_h, gradient)
-            by_p = q_p[0, :, :, 0][:, :, None] * gradient[:, None, :]      # (K, 4, 3)
-            scatter_rows(jacobian, values, row, ((distance - kept) / CLEARANCE_SCALE)[None],
-                         by_h[None] / CLEARANCE_SCALE, by_p[None] / CLEARANCE_SCALE, span,
-                         *columns)
+            self.clearance.write_rows(padded, points, span, fraction, body, kept, columns,
+                                      values, jacobian, row)
         if not self._free_ends:
             return values, jacobian
         return self._fold(points, intervals, scale, values, jacobian, taus)
@@ -334,9 +319,9 @@ class ShapeProblem:
         A free end's P1 and P2 are functions of its (v, a) and first two durations
         (``FreeEnd.points``): their columns' Jacobian goes to those by the chain rule.
         Then per free end: tau - time(v, a) >= 0, reach(a) - v >= 0, and its P1 and P2
-        within the position limits (``POSITION_MARGIN`` inside, as the free points).
+        within the position limits (``PositionBound.inner``, as the free points).
         """
-        lower, upper = inner_limits(self.robot)
+        lower, upper = self.positions.inner
         extra_values, extra = [], []
         for n, (k, state) in enumerate(zip(self._free_ends, self.speeds(points, intervals))):
             end = self.ends[k]
@@ -376,4 +361,4 @@ class ShapeProblem:
     def clearances(self, curve: CubicBSpline, span, fraction) -> np.ndarray:
         """Return every body's clearance and port margin (K, 4 + 4P) that the rows keep."""
         times = curve.breaks()[span] + curve.intervals[span] * fraction
-        return self.row_model.body_clearance(curve.evaluate(times))
+        return self.clearance.model.body_clearance(curve.evaluate(times))

@@ -14,9 +14,10 @@ import numpy as np
 
 from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, derivative_points
 from wafer_planner_ros.trajectory.bspline import knots_from_intervals, padded_windows, WINDOW
-from wafer_planner_ros.trajectory.rows import control_row_count, control_rows, sample_rows
+from wafer_planner_ros.trajectory.constraints import joint_bounds, limit_constraints
+from wafer_planner_ros.trajectory.constraints import ratio_orders, wafer_bound
 from wafer_planner_ros.trajectory.tuning import TimingSettings
-from wafer_planner_ros.trajectory.verify import LIMIT_ORDERS, limit_ratios
+from wafer_planner_ros.trajectory.verify import limit_ratios
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,8 +56,13 @@ class TimingProblem:
     """The knot-interval optimisation of one set of control points."""
 
     def __init__(self, control_points: np.ndarray, robot,
-                 settings: TimingSettings = TimingSettings()):
-        """Set up the problem for control points (n + 1, 3) of a cell's robot."""
+                 settings: TimingSettings = TimingSettings(), constraints=None):
+        """
+        Set up the problem for control points (n + 1, 3) of a cell's robot.
+
+        ``constraints``: the limits kept (``trajectory.constraints``); default: those of
+        ``robot``'s set in use with the settings' margin.
+        """
         self.settings = settings
         self.min_interval = settings.shortest(robot)
         """s: the shortest span."""
@@ -66,16 +72,16 @@ class TimingProblem:
         self.arm = robot.arm
         self.limit_set = robot.limit_set
         self.limits = robot.limits
-        self._control_limits = self.limits.rows(settings.margin)
-        wafer = self.limit_set.wafer
-        self.wafer_limited = wafer is not None
-        """Whether the wafer limit applies (loaded): if not, samples have no rows."""
-        self._wafer_limits = wafer.rows(settings.margin) if wafer else np.zeros(3)
+        self.limits_kept = limit_constraints(robot.limit_set, settings.margin) \
+            if constraints is None else list(constraints)
+        self._joints = joint_bounds(self.limits_kept)
+        self.wafer = wafer_bound(self.limits_kept)
+        """The wafer limit (loaded), or None: then samples have no rows."""
         self._fixed = -np.ones((len(self.points), 3), np.int64)  # no control point moves
 
     def samples(self, span: np.ndarray, fraction: np.ndarray) -> Samples:
         """Return the samples at ``fraction`` (0..1) of the given spans."""
-        keep = slice(None) if self.wafer_limited else slice(0)
+        keep = slice(None) if self.wafer is not None else slice(0)
         return Samples(span=np.asarray(span, np.int64)[keep],
                        fraction=np.asarray(fraction, float)[keep])
 
@@ -87,9 +93,9 @@ class TimingProblem:
         """
         knots = knots_from_intervals(np.ascontiguousarray(intervals, float))
         out = [derivative_points(self.points, knots, DEGREE)]
-        out.append(derivative_points(out[0], knots[1:-1], DEGREE - 1))
-        if self.limits.jerk is not None:
-            out.append(derivative_points(out[1], knots[2:-2], DEGREE - 2))
+        for order in range(2, len(self._joints) + 1):
+            out.append(derivative_points(out[-1], knots[order - 1:1 - order],
+                                         DEGREE + 1 - order))
         return knots, out
 
     def control_constraints(self, intervals) -> np.ndarray:
@@ -124,18 +130,22 @@ class TimingProblem:
         """Return the control-point constraint values and, if asked, their Jacobian (R, m)."""
         intervals = np.ascontiguousarray(intervals, float)
         m = len(intervals)
-        values = np.empty(control_row_count(len(self.points), len(self._control_limits)))
+        values = np.empty(sum(bound.row_count(len(self.points)) for bound in self._joints))
         jacobian = np.zeros((len(values), m if gradients else 0))
-        control_rows(self.points, intervals, self._control_limits, self._fixed, np.arange(m),
-                     np.ones(m), values, jacobian, gradients)
+        columns, row = (self._fixed, np.arange(m), np.ones(m)), 0
+        for bound in self._joints:
+            row = bound.write_rows(self.points, intervals, columns, values, jacobian, row,
+                                   gradients)
         return values, jacobian
 
     def _wafer(self, intervals: np.ndarray, samples: Samples, gradients: bool) -> tuple:
         """Return the wafer constraint values (c * K,) and, if asked, their Jacobian."""
+        if self.wafer is None:
+            return np.empty(0), np.zeros((0, len(intervals))) if gradients else None
         padded, windows = padded_windows(np.asarray(intervals, float), samples.span)
-        values, local, _ = sample_rows(padded, self.points, samples.span, samples.fraction,
-                                       self.arm.link_lengths, self._wafer_limits, False,
-                                       gradients)
+        values, local, _ = self.wafer.sample_values(padded, self.points, samples.span,
+                                                    samples.fraction, self.arm.link_lengths,
+                                                    gradients)
         parts = len(values)
         if not gradients:
             return values.ravel(), None
@@ -151,10 +161,10 @@ class TimingProblem:
         span, fraction = dense_grid(intervals, self.settings.dense_step)
         spline = CubicBSpline.from_intervals(self.points, intervals)
         t = spline.knots[span + DEGREE] + intervals[span] * fraction
-        if not self.wafer_limited:
+        if self.wafer is None:
             return np.zeros(len(span)), span, fraction
         ax, ay = self.arm.wafer_acceleration_xy(*spline.evaluate_orders(t))
-        return self.limit_set.wafer_ratio(ax, ay), span, fraction
+        return self.wafer.ratio(ax, ay), span, fraction
 
     def scale_factor(self, intervals: np.ndarray, wafer_ratio=None) -> float:
         """
@@ -163,10 +173,9 @@ class TimingProblem:
         ``wafer_ratio``: the largest ``dense_wafer_ratio`` if the caller already has it.
         """
         ratios = [1.0]
-        for order, (points, limit) in enumerate(zip(self.derivatives(intervals)[1],
-                                                    self._control_limits)):
-            peak = float(np.max(np.abs(points) / limit, initial=0.0))
-            ratios.append(peak ** (1.0 / (order + 1)))  # speed scales 1/λ, accel 1/λ², ...
+        for bound, points in zip(self._joints, self.derivatives(intervals)[1]):
+            # Speed scales 1/λ, acceleration 1/λ², ...
+            ratios.append(bound.peak(points) ** (1.0 / bound.order))
         if wafer_ratio is None:
             wafer_ratio = self.dense_wafer_ratio(intervals)[0].max()
         ratios.append(np.sqrt(float(wafer_ratio) / self.settings.margin))
@@ -181,17 +190,19 @@ class TimingProblem:
         dense instants of the timing before it is scaled, λ times as far apart once it is,
         and a peak between them can exceed the limit (a start of λ = 34 by 0.02 %). Each
         limit over 1 slows the curve so that its ratio, of order k in time
-        (``verify.LIMIT_ORDERS``), comes to ``margin``: by (ratio / margin) ** (1 / k);
+        (``constraints.ratio_orders``), comes to ``margin``: by (ratio / margin) ** (1 / k);
         the check is repeated, ``limit_tries`` times at most (the last slowing is then
         returned unchecked; verification reports whatever it still exceeds).
         """
         timed, factor = np.asarray(intervals, float), 1.0
+        orders = ratio_orders(self.limits_kept)
         for _ in range(self.settings.limit_tries):
-            ratios = limit_ratios(CubicBSpline.from_intervals(self.points, timed), self.robot)
+            ratios = limit_ratios(CubicBSpline.from_intervals(self.points, timed), self.robot,
+                                  self.limits_kept)
             values = np.array(list(ratios.values()))
             if np.all(values <= 1.0) or not np.all(np.isfinite(values)):
                 return timed, factor
-            factor *= max((ratio / self.settings.margin) ** (1.0 / LIMIT_ORDERS[name])
+            factor *= max((ratio / self.settings.margin) ** (1.0 / orders[name])
                           for name, ratio in ratios.items())
             timed = factor * np.asarray(intervals, float)
         return timed, factor

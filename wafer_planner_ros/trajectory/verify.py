@@ -22,6 +22,8 @@ from typing import Mapping, Optional, Tuple
 import numpy as np
 
 from wafer_planner_ros.geometry.ports import describe_deviation
+from wafer_planner_ros.trajectory.constraints import limit_constraints, position_bound
+from wafer_planner_ros.trajectory.constraints import state_ratios, States
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.proof import CurveProof, DEFAULT_MAX_DEPTH, prove
 
@@ -65,9 +67,10 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
     if problem is not None:
         return Verification(problems=(f'ill-formed curve: {problem}',))
     robot = cell.robot
-    limits = robot.limits
-    t, q, qd, qdd, qddd, wafer = limit_states(trajectory, robot)
-    ratios = state_ratios(robot, qd, qdd, qddd, wafer)
+    constraints = limit_constraints(robot.limit_set)
+    states = limit_states(trajectory, robot)
+    t, q, qd, qdd, qddd = states.t, *states.derivatives
+    ratios = state_ratios(constraints, states)
     # Written so that NaN fails: every comparison with NaN is false.
     problems = [f'{name} reaches {ratio:.4f} x its limit'
                 for name, ratio in ratios.items() if not ratio <= 1.0]
@@ -75,8 +78,7 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
                          ('jerk', qddd)):
         if not np.isfinite(values).all():
             problems.append(f'the {name} is not finite everywhere')
-    lower, upper = limits.position.T
-    outside = np.nonzero(np.any((q < lower) | (q > upper), axis=0))[0]
+    outside = position_bound(constraints).outside(q)
     problems += [f'joint {robot.joint_names[j]} leaves its position limits' for j in outside]
     if not np.array_equal(q[0], start) or not np.array_equal(q[-1], goal):
         problems.append('the trajectory does not start and end exactly at start and goal')
@@ -160,34 +162,26 @@ def collision_times(trajectory: Trajectory) -> np.ndarray:
     return np.append(t, trajectory.duration)
 
 
-LIMIT_ORDERS = {'velocity': 1, 'acceleration': 2, 'jerk': 3, 'wafer_x': 2, 'wafer_y': 2,
-                'wafer_norm': 2}
-"""The order in time of each limit: the curve slowed by λ, q(t / λ), has its ratio divided
-by λ ** order (the wafer acceleration, J(q) q'' + (dJ/dt) q', by λ ** 2 like q'')."""
-
-
 def limit_times(duration: float) -> np.ndarray:
     """Return the times of the limit check: 0 to ``duration``, at most LIMIT_STEP apart."""
     return np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
 
 
-def limit_states(trajectory: Trajectory, robot) -> tuple:
-    """Return (t, q, q', q'', q''', wafer acceleration (K, 2)) at the ``limit_times``."""
+def limit_states(trajectory: Trajectory, robot) -> States:
+    """Return the curve's states (with the wafer acceleration) at the ``limit_times``."""
     t = limit_times(trajectory.duration)
     q, qd, qdd, qddd = trajectory.evaluate_orders(t, range(4))
-    return t, q, qd, qdd, qddd, robot.arm.wafer_acceleration(q, qd, qdd)
+    return States(t, q, qd, qdd, qddd, robot.arm.wafer_acceleration(q, qd, qdd))
 
 
-def state_ratios(robot, qd, qdd, qddd, wafer) -> dict:
-    """Return the largest |value| / limit of each limit of ``robot``'s set in use."""
-    return robot.limit_set.ratios(qd, qdd, qddd, wafer)
-
-
-def limit_ratios(trajectory: Trajectory, robot) -> dict:
+def limit_ratios(trajectory: Trajectory, robot, constraints=None) -> dict:
     """
     Return the largest |value| / limit of each limit, exactly as ``verify`` finds them.
 
     The same check times, the same values: a curve whose ratios here are all <= 1 passes
-    the verification's limit check.
+    the verification's limit check. ``constraints``: the limits (default: those of
+    ``robot``'s set in use, ``limit_constraints``).
     """
-    return state_ratios(robot, *limit_states(trajectory, robot)[2:])
+    if constraints is None:
+        constraints = limit_constraints(robot.limit_set)
+    return state_ratios(constraints, limit_states(trajectory, robot))
