@@ -14,7 +14,8 @@ from wafer_planner_ros.cli.common import run
 from wafer_planner_ros.cli.plan import main
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.plotting import plot_trajectory
-from wafer_planner_ros.service.table import build_table, save_table, table_key, table_path
+from wafer_planner_ros.service.table import build_table, table_key
+from wafer_planner_ros.service.table_store import save_table, table_path
 
 
 def _run(capsys, *argv):

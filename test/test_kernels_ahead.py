@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from wafer_planner_ros import kernels, kernels_ahead
+from wafer_planner_ros import kernels, kernels_ahead, kernels_keys
 from wafer_planner_ros.node import startup
 from wafer_planner_ros.service import warmup  # noqa: F401 - every kernel, as the node has them
 from wafer_planner_ros.trajectory import bspline
@@ -73,7 +73,7 @@ def _plan(source: str) -> dict:
 @pytest.mark.slow
 def test_the_build_loads_without_numba_plans_as_numba_does_and_releases_the_gil():
     # The set-up (wafer-kernels) built them for this machine.
-    assert (kernels.ahead_directory() / kernels.AHEAD_MANIFEST).exists(), \
+    assert (kernels.ahead_directory() / kernels_keys.AHEAD_MANIFEST).exists(), \
         f'no build in {kernels.ahead_directory()}: run wafer-kernels'
     ahead, cached = _plan('ahead'), _plan('cached')
     assert ahead['loaded'] > 0 and cached['loaded'] > 0
@@ -91,7 +91,7 @@ def test_a_call_of_types_not_built_runs_numba_with_the_same_answer():
 import sys
 import numpy as np
 import pytest
-from wafer_planner_ros import kernels
+from wafer_planner_ros import kernels, kernels_keys
 from wafer_planner_ros.service import warmup
 from wafer_planner_ros.trajectory import bspline
 assert kernels.load_ahead() > 0
@@ -99,7 +99,7 @@ intervals = np.array([0.5, 0.25, 0.75, 1.0, 0.125, 2.0])
 # Built for a writeable C-ordered float64 vector only (numba's cache may hold more, which
 # a build takes too): every other type is not built.
 table = bspline.knots_from_intervals._ahead
-key = kernels.argument_types((intervals,))
+key = kernels_keys.argument_types((intervals,))
 bspline.knots_from_intervals._ahead = {key: table[key]}
 built = bspline.knots_from_intervals(intervals)
 print('numba' in sys.modules)
@@ -122,13 +122,13 @@ def test_argument_types_are_exact():
     a = np.zeros((3, 2))
     frozen = a.copy()
     frozen.flags.writeable = False
-    assert kernels.argument_types((a, 1.0, 2, True)) == (
+    assert kernels_keys.argument_types((a, 1.0, 2, True)) == (
         ('<f8', 2, 'C', False, True), 'float64', 'int64', 'bool')
-    assert kernels.argument_types((a.T,))[0][2] == 'F'
-    assert kernels.argument_types((a[:, 0],))[0][2] == 'A'
-    assert kernels.argument_types((frozen,))[0][3] is True
-    assert kernels.argument_types((np.float32(1.0),)) is None
-    assert kernels.argument_types(([1.0],)) is None
+    assert kernels_keys.argument_types((a.T,))[0][2] == 'F'
+    assert kernels_keys.argument_types((a[:, 0],))[0][2] == 'A'
+    assert kernels_keys.argument_types((frozen,))[0][3] is True
+    assert kernels_keys.argument_types((np.float32(1.0),)) is None
+    assert kernels_keys.argument_types(([1.0],)) is None
 
 
 def test_the_polygon_kernels_are_left_to_numba_and_the_rest_built():
@@ -144,7 +144,7 @@ def test_a_build_of_other_kernels_or_a_broken_manifest_is_not_loaded(tmp_path, m
     monkeypatch.setenv('NUMBA_CACHE_DIR', str(tmp_path))
     with pytest.raises(kernels.NoBuildAhead, match='none built for this machine'):
         kernels.load_ahead()
-    manifest = kernels.ahead_directory() / kernels.AHEAD_MANIFEST
+    manifest = kernels.ahead_directory() / kernels_keys.AHEAD_MANIFEST
     manifest.parent.mkdir(parents=True)
     manifest.write_text('{not json')
     with pytest.raises(OSError, match='is not a build manifest'):

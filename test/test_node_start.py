@@ -147,7 +147,8 @@ def table_node(roadmap_cache, tmp_path_factory, default_cell, default_roadmap):
     from dataclasses import replace
     from node_harness import Harness, isolate_dds
     from wafer_planner_ros.planner import Planner, PlannerSettings
-    from wafer_planner_ros.service.table import build_table, save_table, table_key
+    from wafer_planner_ros.service.table import build_table, table_key
+    from wafer_planner_ros.service.table_store import save_table
     isolate_dds(tmp_path_factory.mktemp('dds'))
     cache = tmp_path_factory.mktemp('cache')
     for path in roadmap_cache.glob('roadmap-*.npz'):

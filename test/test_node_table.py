@@ -14,8 +14,9 @@ from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.service.settings import settings_from
-from wafer_planner_ros.service.table import build_table, load_table, save_table, table_key
-from wafer_planner_ros.service.table import port_pairs, table_pairs, table_path
+from wafer_planner_ros.service.table import build_table, load_table, table_key
+from wafer_planner_ros.service.table import port_pairs, table_pairs
+from wafer_planner_ros.service.table_store import save_table, table_path
 
 
 @pytest.mark.slow

@@ -24,9 +24,10 @@ from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_and_store_table, inherited_table
 from wafer_planner_ros.service.table import build_table, load_or_build_table, load_table
-from wafer_planner_ros.service.table import lacking, port_pairs, save_table
+from wafer_planner_ros.service.table import lacking, port_pairs
 from wafer_planner_ros.service.table import table_key
-from wafer_planner_ros.service.table import table_pairs, table_path, TableError
+from wafer_planner_ros.service.table import table_pairs, TableError
+from wafer_planner_ros.service.table_store import save_table, table_path
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.verify import verify
@@ -321,9 +322,9 @@ def test_a_retaught_station_replans_only_its_own_pairs(default_cell, tmp_path, m
     assert moved.digest != default_cell.digest
     second = Planner(moved, load_or_build(moved, cache_dir=cache).roadmap)
     planned, checked = [], []
-    plan, verified = second.plan, table_module._verified
+    plan, verified = second.plan, table_module.verified_entry
     monkeypatch.setattr(second, 'plan', lambda *a, **k: planned.append(a[:2]) or plan(*a, **k))
-    monkeypatch.setattr(table_module, '_verified',
+    monkeypatch.setattr(table_module, 'verified_entry',
                         lambda p, pair, entry: checked.append(pair) or verified(p, pair, entry))
     table = build_and_store_table(second, cache)
     assert set(table.entries) == set(station_pairs(moved)) and not table.failures

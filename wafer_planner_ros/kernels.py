@@ -1,32 +1,32 @@
 """
 Compiled kernels: numba functions that import numba only when one is first called.
 
-Importing numba and loading the kernels from its cache costs about a second: the node
-starts it as its process starts (``node.startup``) and is ready once it is done. A function
-decorated with :func:`kernel` is a :class:`Kernel`: calling it calls its numba dispatcher
-(``numba.njit(cache=True, ...)``), made on the first call. The dispatcher is made from a
-copy of the function whose globals name the compiled form of every other kernel it calls,
-so kernels call kernels in compiled code as numba functions do. ``Kernel.interpreted`` runs
-the same code as plain Python (the kernels it calls interpreted too): a cell file's
-polygons and its stations' clearances are checked that way when they are small (``sized``),
-so that reading a cell needs no numba.
+Importing numba and loading the kernels from its cache takes long enough to matter at every
+start: the node starts it as its process starts (``node.startup``) and is ready once it is
+done. A function decorated with :func:`kernel` is a :class:`Kernel`: calling it calls its
+numba dispatcher (``numba.njit(cache=True, ...)``), made on the first call. The dispatcher
+is made from a copy of the function whose globals name the compiled form of every other
+kernel it calls, so kernels call kernels in compiled code as numba functions do.
+``Kernel.interpreted`` runs the same code as plain Python (the kernels it calls interpreted
+too): a cell file's polygons and its stations' clearances are checked that way when they
+are small (``sized``), so that reading a cell needs no numba.
 :data:`objmode` stands for ``numba.objmode`` in a kernel (a no-op when interpreted).
 
 Where numba keeps them: ``NUMBA_CACHE_DIR`` when it is set, else :func:`cache_root`
 (``$XDG_CACHE_HOME/wafer_planner_ros/numba``, by default ``~/.cache/...``), the same for the
 node and every tool whatever their other cache directories, set when numba is first imported
 here. ``wafer-kernels`` compiles every kernel into it once after an install
-(``service.warmup``); :func:`load_cached` then loads them all in about a second,
-and :func:`uncached` names the kernels that would still compile.
+(``service.warmup``); :func:`load_cached` then loads them all without compiling any, and
+:func:`uncached` names the kernels that would still compile.
 
 Ahead of time: ``wafer-kernels`` also builds every kernel it can into one extension module
 for this machine (``kernels_ahead``, numba's ``pycc``), kept beside numba's cache
-(:func:`ahead_directory`). :func:`load_ahead` loads it in a few milliseconds without
-importing numba, and a kernel called with arguments of a type it was built for runs the
+(:func:`ahead_directory`). :func:`load_ahead` loads it without importing numba, far sooner
+than numba's cache, and a kernel called with arguments of a type it was built for runs the
 built code; any other call goes to numba as above. The build is used only by the Python,
-numpy and numba it was built with, on the same processor (:func:`ahead_identity`), and
-only while the kernels' code is what it was built from (:func:`kernels_digest`): anything
-else finds no build and uses numba.
+numpy and numba it was built with, on the same processor, and only while the kernels' code
+is what it was built from (:func:`kernels_digest`): anything else finds no build and uses
+numba. What a build and a call are keyed by is ``kernels_keys``'s.
 
 Only this module and the build (``kernels_ahead``) import numba (a contract in
 ``setup.cfg``).
@@ -38,13 +38,14 @@ import importlib.util
 import json
 import os
 from pathlib import Path
-import platform
-import sys
 import threading
 import types
 from typing import Callable, List, Optional
 
 import numpy as np
+
+from wafer_planner_ros.kernels_keys import ahead_identity, AHEAD_MANIFEST, AHEAD_MODULE
+from wafer_planner_ros.kernels_keys import argument_types, file_digest, global_names, hashable
 
 _LOCK = threading.RLock()
 _KERNELS: List['Kernel'] = []
@@ -266,37 +267,6 @@ def _rebound(function: Callable, form: Callable[[Kernel], Callable], mode) -> Ca
     return copy
 
 
-AHEAD_MODULE = 'wafer_planner_ros_kernels'
-"""The name of the extension module built ahead of time (its ``PyInit_`` function's)."""
-AHEAD_MANIFEST = 'manifest.json'
-"""The file beside it that says which function is which kernel for which argument types."""
-
-SCALARS = {float: 'float64', np.float64: 'float64', int: 'int64', np.int64: 'int64',
-           bool: 'bool', np.bool_: 'bool', complex: 'complex128', np.complex128: 'complex128'}
-"""An argument's Python type -> the numba type a kernel is built for."""
-
-
-def argument_types(args: tuple) -> Optional[tuple]:
-    """
-    Return the types of ``args`` as the build names them, None when one has no such type.
-
-    An array is ``(dtype, ndim, layout, readonly, aligned)`` as numba types it (layout 'C',
-    'F' or 'A' from numpy's flags): the built code trusts that its arguments are exactly
-    of the types it was built for, so a call matches only on all of these.
-    """
-    found = []
-    for value in args:
-        kind = SCALARS.get(type(value))
-        if kind is None:
-            if type(value) is not np.ndarray:
-                return None
-            flags = value.flags
-            layout = 'C' if flags.c_contiguous else 'F' if flags.f_contiguous else 'A'
-            kind = (value.dtype.str, value.ndim, layout, not flags.writeable, flags.aligned)
-        found.append(kind)
-    return tuple(found)
-
-
 def ahead_root() -> Path:
     """Return where the builds ahead of time are kept: beside numba's cache."""
     return cache_root() / 'ahead-of-time'
@@ -304,20 +274,6 @@ def ahead_root() -> Path:
 
 class NoBuildAhead(Exception):
     """There is no build ahead of time for this machine and these kernels (it says why)."""
-
-
-def ahead_identity() -> dict:
-    """
-    Return what a build ahead of time is valid for, and ``key``: a digest of all of it.
-
-    The Python, numpy and numba (its build's version file) that run it and the processor
-    (model and instruction-set flags: the code is built for this one). The kernels' own
-    code is checked on load (``kernels_digest``).
-    """
-    facts = {'python': sys.version, 'machine': platform.machine(), 'numpy': np.__version__,
-             'numba': _file_digest(_numba_version_file()), 'cpu': _processor()}
-    facts['key'] = hashlib.sha256(json.dumps(facts, sort_keys=True).encode()).hexdigest()[:20]
-    return facts
 
 
 def ahead_directory(identity: Optional[dict] = None) -> Path:
@@ -340,7 +296,7 @@ def kernels_digest(modules) -> str:
             continue
         path = k.function.__code__.co_filename
         if path not in sources:
-            sources[path] = _file_digest(Path(path))
+            sources[path] = file_digest(Path(path))
         digest.update(f'{k.__module__}:{k.__qualname__}:{sources[path]}:'
                       f'{sorted(k.options.items())}'.encode())
         for name in sorted(global_names(k.function.__code__)):
@@ -404,7 +360,7 @@ def load_ahead() -> int:
     for name, built in manifest['kernels'].items():
         if name not in by_name:
             raise ImportError(f'{directory} builds {name}, which is not a kernel')
-        tables[name] = {_hashable(types_): getattr(module, symbol) for types_, symbol in built}
+        tables[name] = {hashable(types_): getattr(module, symbol) for types_, symbol in built}
     for name, table in tables.items():
         by_name[name]._ahead = table
     return sum(len(table) for table in tables.values())
@@ -413,44 +369,3 @@ def load_ahead() -> int:
 def ahead_count() -> int:
     """Return how many kernel signatures this process runs as built ahead of time."""
     return sum(k.ahead() for k in registered())
-
-
-def _hashable(value):
-    """Return JSON's lists as tuples, all the way down."""
-    return tuple(_hashable(v) for v in value) if isinstance(value, list) else value
-
-
-def _numba_version_file() -> Optional[Path]:
-    """Return numba's version file (its release and build), found without importing it."""
-    spec = importlib.util.find_spec('numba')
-    return None if spec is None or not spec.origin else Path(spec.origin).parent / '_version.py'
-
-
-def _file_digest(path: Optional[Path]) -> str:
-    """Return a digest of the file's bytes ('' when there is none)."""
-    try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()[:20] if path else ''
-    except OSError:
-        return ''
-
-
-def _processor() -> str:
-    """Return the processor's model and flags (Linux), else what ``platform`` says."""
-    try:
-        with open('/proc/cpuinfo') as info:
-            first = info.read().split('\n\n', 1)[0]
-    except OSError:
-        return platform.processor()
-    wanted = [line.split(':', 1)[1].strip() for line in first.splitlines()
-              if line.split(':', 1)[0].strip() in ('vendor_id', 'model name', 'flags',
-                                                   'Features', 'CPU part')]
-    return hashlib.sha256('\n'.join(wanted).encode()).hexdigest()[:20]
-
-
-def global_names(code: types.CodeType) -> set:
-    """Return the global names a function's code uses, its nested functions' included."""
-    found = set(code.co_names)
-    for constant in code.co_consts:
-        if isinstance(constant, types.CodeType):
-            found |= global_names(constant)
-    return found

@@ -1,13 +1,13 @@
 """
 The kernels built ahead of time: one extension module for this machine, loaded without numba.
 
-Loading numba and the kernels from its cache takes about a second at every start; the
-module this builds loads in a few milliseconds (``kernels.load_ahead``). :func:`build` takes
+Loading numba and the kernels from its cache takes long at every start; the module this
+builds loads far sooner, without numba (``kernels.load_ahead``). :func:`build` takes
 every signature the process has of each kernel (compiled or loaded from numba's cache: after
 ``service.warmup.compile_kernels``, those the planner calls) and compiles them with numba's
 ahead-of-time compiler (``numba.pycc``) for this processor into
 ``kernels.ahead_directory()``, with a manifest of which function is which kernel for which
-argument types (``kernels.argument_types``). About 30 s on two cores, with a C compiler.
+argument types (``kernels_keys.argument_types``). It needs a C compiler.
 
 Left to numba: the kernels that reach ``objmode`` (the exact orientation test's slow path
 for coordinates out of its fast range, so every polygon check): numba's ahead-of-time
@@ -32,7 +32,7 @@ import time
 from typing import Callable, Dict, List, Optional, Tuple
 import warnings
 
-from wafer_planner_ros import kernels
+from wafer_planner_ros import kernels, kernels_keys
 
 
 def buildable(every: List[kernels.Kernel]) -> Tuple[List[kernels.Kernel], List[kernels.Kernel]]:
@@ -42,7 +42,7 @@ def buildable(every: List[kernels.Kernel]) -> Tuple[List[kernels.Kernel], List[k
     def reaches_objmode(k: kernels.Kernel) -> bool:
         if id(k) not in reaching:
             reaching[id(k)] = False  # a cycle does not reach it by itself
-            called = [k.function.__globals__.get(name) for name in kernels.global_names(
+            called = [k.function.__globals__.get(name) for name in kernels_keys.global_names(
                 k.function.__code__)]
             reaching[id(k)] = any(v is kernels.objmode for v in called) or any(
                 reaches_objmode(v) for v in called if isinstance(v, kernels.Kernel))
@@ -53,7 +53,7 @@ def buildable(every: List[kernels.Kernel]) -> Tuple[List[kernels.Kernel], List[k
 
 
 def _argument_type(numba_type) -> Optional[object]:
-    """Return ``kernels.argument_types``'s name of a numba type; None for other types."""
+    """Return ``kernels_keys.argument_types``'s name of a numba type; None for other types."""
     from numba.core import types
     from numba.np import numpy_support
     if isinstance(numba_type, types.Array):
@@ -62,7 +62,7 @@ def _argument_type(numba_type) -> Optional[object]:
     if isinstance(numba_type, types.Literal) or isinstance(numba_type, types.Omitted):
         return None
     name = str(numba_type)
-    return name if name in set(kernels.SCALARS.values()) else None
+    return name if name in set(kernels_keys.SCALARS.values()) else None
 
 
 @contextlib.contextmanager
@@ -100,7 +100,7 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
     ours = [k for k in kernels.registered()
             if k.__module__.split('.')[0] == kernels.__name__.split('.')[0]]
     modules = sorted({k.__module__ for k in ours})
-    identity = kernels.ahead_identity()
+    identity = kernels_keys.ahead_identity()
     directory = kernels.ahead_directory(identity)
     built, left = buildable(ours)
     found = {'directory': str(directory), 'left': [k.__qualname__ for k in left]}
@@ -118,7 +118,7 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
             from numba.pycc import CC
         except ImportError as exc:  # a numba without its ahead-of-time compiler
             raise RuntimeError(f'the ahead-of-time build failed: {exc}') from exc
-    compiler = CC(kernels.AHEAD_MODULE, source_module=kernels)
+    compiler = CC(kernels_keys.AHEAD_MODULE, source_module=kernels)
     compiler.target_cpu = 'host'
     compiler.verbose = False
     table: Dict[str, list] = {}
@@ -151,7 +151,7 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
         manifest = {'file': compiler.output_file, 'modules': modules,
                     'digest': kernels.kernels_digest(modules), 'kernels': table,
                     'left_to_numba': found['left'], 'identity': identity}
-        (staging / kernels.AHEAD_MANIFEST).write_text(json.dumps(manifest, indent=1))
+        (staging / kernels_keys.AHEAD_MANIFEST).write_text(json.dumps(manifest, indent=1))
         _install(staging, directory)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -168,7 +168,7 @@ def _install(staging: Path, directory: Path) -> None:
     try:
         os.rename(staging, directory)
     except OSError:
-        if not (directory / kernels.AHEAD_MANIFEST).exists():
+        if not (directory / kernels_keys.AHEAD_MANIFEST).exists():
             raise  # not another build's, done meanwhile
     finally:
         if previous is not None:

@@ -21,9 +21,9 @@ tables, budgets, adopting another limit set's curve).
 """
 
 from wafer_planner_ros.planner.pipeline import Planner
-from wafer_planner_ros.planner.result import path_lengths, PlanResult
+from wafer_planner_ros.planner.result import answer, path_lengths, PlanResult
 from wafer_planner_ros.planner.settings import PlannerSettings, SAMPLE_PERIOD_RANGE
 from wafer_planner_ros.planner.stages import STAGES
 
 __all__ = ['Planner', 'PlannerSettings', 'PlanResult', 'SAMPLE_PERIOD_RANGE', 'STAGES',
-           'path_lengths']
+           'answer', 'path_lengths']

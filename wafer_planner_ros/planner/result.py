@@ -69,13 +69,13 @@ def answer(planner, start: Endpoint, goal: Endpoint, start_q, goal_q, branches,
            trajectory: Trajectory, initial_cycle_time: float, verification: Verification,
            roadmap_path, path, metrics: Mapping, control_points: int, warnings=(),
            timings_ms: Optional[Mapping] = None, method: Optional[str] = None,
-           extra: Optional[Mapping] = None) -> PlanResult:
+           extra: Optional[Mapping] = None, lengths: Optional[Mapping] = None) -> PlanResult:
     """
     Return a verified curve as ``planner``'s answer, sampled at its period and measured.
 
     ``metrics``: the source's own figures, then every answer's (``method``: the planner's
     curve method's name unless given; path sizes, ``control_points``, ``branches``, path
-    lengths), then ``extra``.
+    lengths: ``path_lengths`` unless the caller has them, ``lengths``), then ``extra``.
     """
     times, positions, velocities, accelerations = trajectory.samples(
         planner.settings.sample_period)
@@ -83,7 +83,8 @@ def answer(planner, start: Endpoint, goal: Endpoint, start_q, goal_q, branches,
         metrics, method=planner.method.name if method is None else method,
         roadmap_path_vertices=len(roadmap_path), path_vertices=len(path),
         control_points=control_points, branches=list(branches),
-        **path_lengths(planner.cell, trajectory), **(extra or {}))
+        **(path_lengths(planner.cell, trajectory) if lengths is None else lengths),
+        **(extra or {}))
     return PlanResult(
         start=start, goal=goal, start_q=start_q, goal_q=goal_q, branches=tuple(branches),
         load=planner.load, trajectory=trajectory, initial_cycle_time=initial_cycle_time,

@@ -6,22 +6,17 @@ Two ways in, one file order:
 - ``write_now`` (the node's executor: each query's request, trajectory and result together,
   before the answer is published) writes in the calling thread and, with ``flush``,
   hands everything to the operating system before it returns: once it returns True a
-  process crash, even SIGKILL, cannot lose those messages. Writing in place costs a few
-  hundred microseconds; handing the bytes to another thread and waiting for it costs
-  milliseconds as soon as a planning thread holds the GIL.
+  process crash, even SIGKILL, cannot lose those messages. Writing in place is quick;
+  handing the bytes to another thread and waiting for it is slow as soon as a planning
+  thread holds the GIL.
 - ``record``, ``attach`` and ``metadata`` (the worker: roadmap markers, the cell file) only
   queue; the thread writes them. Queued items are written before any later ``write_now``.
 
-Splitting (``Limits``, read again before every group, so they may change at run time):
-the messages of one ``write_now`` call are a group, and groups are never split across
-files. Before a group is written, the current file is finished and the next one started
-when the group would take the finished file past ``max_bag_size`` (``projected_size``, an
-upper bound) or the file was opened ``max_bag_duration`` ago or more (by ``clock``), unless
-the file holds no group yet. Every new file first gets the ``preamble`` (what makes it
-readable alone: the node's cell file, roadmap load, parameters and markers). Before a new
-file is started, ``retention.prune`` removes the oldest files of the node's recordings
-beyond ``keep`` (counting the new one); syncing and closing the finished file, and
-rewriting the ``metadata.yaml`` of older recordings that lost files, are left to the thread.
+Splitting (``Limits``, read again before every group, so they may change at run time) is
+``recording.splitting``'s: the messages of one ``write_now`` call are a group, never split
+across files; a new file begins with the ``preamble``, and the oldest files beyond ``keep``
+are removed. Syncing and closing a finished file, and rewriting the ``metadata.yaml`` of
+older recordings that lost files, are left to the thread.
 
 The thread also ``fsync``-s the file after every flush, against power loss. When a sync
 has hung for ``STALL`` seconds, or the writer lock cannot be had in that time, the disk is
@@ -30,8 +25,8 @@ answers are never held up by a stuck disk (the caller counts them). A write erro
 disk, an unwritable directory) stops the recording, is reported through ``on_error``
 and ``status()``, and leaves the bag readable up to its last flush (``wafer-recover``
 completes it). So does a deleted file (its directory removed): Linux takes writes to it
-without complaint, so every write, and ``status()``, checks that it is still there (about
-a microsecond; ``BagWriter.deleted``, which does not look on network filesystems).
+without complaint, so every write, and ``status()``, checks that it is still there (cheaply:
+``BagWriter.deleted``, which does not look on network filesystems).
 Planning goes on regardless. Messages are counted ``written`` only once the file was found
 still there after them; ``lost`` counts the answers (``write_now`` with ``flush``) that
 did not reach the file because the recording had stopped, or failed while they waited.
@@ -48,6 +43,7 @@ from typing import Callable, Mapping, Optional, Sequence, Tuple, Union
 
 from wafer_planner_ros.recording import retention
 from wafer_planner_ros.recording.bag import BagWriter, sync_and_close, Topic
+from wafer_planner_ros.recording.splitting import Splitter
 
 logger = logging.getLogger(__name__)
 
@@ -124,8 +120,6 @@ class Recorder:
         first file).
         """
         self._limits = limits if callable(limits) else (lambda: limits)
-        self._clock = clock
-        self._preamble = preamble
         self._writer = BagWriter(directory, topics, opener)
         self.directory = self._writer.directory
         self._on_error = on_error
@@ -149,20 +143,17 @@ class Recorder:
         self.lost = 0
         """Answers (``write_now`` with ``flush``) not written, as ``dropped``."""
         self.written = 0
-        self.removed = 0
-        """Files removed by retention."""
         self._chores = deque()
         """What the thread does outside the writer lock after a split: (the finished
         file's stream or None, the older bags whose metadata.yaml to rewrite)."""
-        self._groups = 0
-        """Groups written into the current file."""
-        self._opened = 0
-        """When the current file was started (``clock``)."""
+        self._files = Splitter(
+            self._writer, self._limits, clock,
+            preamble if preamble is not None else (lambda since: Preamble()), self._finished)
         try:
-            touched = self._prune(self._limits(), protect=self._writer.path)
+            touched = self._files.prune(self._limits(), protect=self._writer.path)
             if touched:
                 self._chores.append((None, touched))
-            self._begin_file(None)
+            self._files.begin_file(None)
         except Exception:
             self._writer.abandon()
             raise
@@ -189,7 +180,7 @@ class Recorder:
                     self._count_dropped(len(messages), flush)
                     return False
                 self._drain()
-                self._write_group(messages)
+                self._files.write_group(messages)
                 if flush:
                     self._writer.flush()
                 self._check()
@@ -213,6 +204,11 @@ class Recorder:
         """Return True while a sync has been hanging for more than ``STALL`` seconds."""
         began = self._sync_began
         return began is not None and time.monotonic() - began > STALL
+
+    @property
+    def removed(self) -> int:
+        """Return how many files retention removed."""
+        return self._files.removed
 
     # -------------------------------------------------------------- any thread: queued
 
@@ -304,59 +300,11 @@ class Recorder:
         self.dropped += sum(len(item[1]) for item in items if item[0] is _Item.MESSAGE)
         self.lost += sum(1 for item in items if item[0] is _Item.FLUSH and item[1])
 
-    # -------------------------------------------------------------- splitting (lock held)
-
-    def _write_group(self, messages: Sequence[Message], group: bool = True) -> None:
-        """Write ``messages``; a group first starts a new file when the current one is due."""
-        if group and messages and self._groups and self._due(messages):
-            self._split(min(message[2] for message in messages))
-        for message in messages:
-            self._writer.write(*message)
-        self._groups += group and bool(messages)
-
-    def _due(self, messages: Sequence[Message]) -> bool:
-        limits = self._limits()
-        if limits.max_bag_duration > 0 and \
-                self._clock() - self._opened >= limits.max_bag_duration * 1e9:
-            return True
-        return limits.max_bag_size > 0 and limits.max_bag_size < \
-            self._writer.projected_size(len(message[1]) for message in messages)
-
-    def _split(self, since: int) -> None:
-        limits = self._limits()
-        finished, name = self._writer.finish_file(), self._writer.path
-        size = finished.tell()
-        if limits.max_bag_size and size > limits.max_bag_size:
-            logger.warning('%s: %d bytes, over recording.max_bag_size (%d): its first query '
-                           'alone did not fit', name, size, limits.max_bag_size)
-        touched = self._prune(limits, room=limits.keep - 1)
-        self._writer.next_file()
-        self._begin_file(since)
+    def _finished(self, finished, touched: Tuple[Path, ...]) -> None:
+        """Hand a finished file's stream and the bags to rewrite to the thread (a split)."""
         with self._wake:
             self._chores.append((finished, touched))
             self._wake.notify()
-
-    def _begin_file(self, since: Optional[int]) -> None:
-        """Write the preamble into the new current file and hand it to the system."""
-        self._opened, self._groups = self._clock(), 0
-        preamble = self._preamble(since) if self._preamble is not None else Preamble()
-        for attachment in preamble.attachments:
-            self._writer.attach(*attachment)
-        for name, values in preamble.metadata:
-            self._writer.metadata(name, values)
-        for message in preamble.messages:
-            self._writer.write(*message)
-        self._writer.flush()
-
-    def _prune(self, limits: Limits, room: Optional[int] = None,
-               protect: Optional[Path] = None) -> Tuple[Path, ...]:
-        """Apply ``keep``; return the older bags whose ``metadata.yaml`` must be rewritten."""
-        if limits.keep <= 0:
-            return ()
-        removed, touched = retention.prune(
-            self.directory, limits.keep if room is None else room, protect)
-        self.removed += len(removed)
-        return tuple(touched)
 
     # -------------------------------------------------------------- the thread
 
@@ -417,7 +365,7 @@ class Recorder:
             for done, item in enumerate(items, 1):
                 kind = item[0]
                 if kind is _Item.MESSAGE:
-                    self._write_group(*item[1:])
+                    self._files.write_group(*item[1:])
                 elif kind is _Item.FLUSH:
                     self._writer.flush()
                     flushed = True
