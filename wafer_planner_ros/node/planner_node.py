@@ -51,10 +51,11 @@ from wafer_planner_ros.errors import ErrorCode
 from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.live import LiveView
+from wafer_planner_ros.node.loader import QUEUED
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
 from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
-from wafer_planner_ros.node.worker import PlanningWorker, QUEUED
+from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
