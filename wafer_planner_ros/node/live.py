@@ -16,8 +16,8 @@ their bounded outboxes, who is admitted) in a thread of its own; this adapter is
 uses: it starts and stops that server as the ``live.*`` parameters say, hands it what the node
 publishes and where the joint-space frame stands, and reports its address, error and clients in
 the status. So what the view holds per client is at most its outbox, the message being sent
-(once more, in the socket's buffer) and ``INCOMING`` of what it sent (doc/operations.md, "Live
-view in Foxglove").
+(once more, in the socket's buffer) and ``live_server.INCOMING`` of what it sent
+(doc/operations.md, "Live view in Foxglove").
 ``foxglove-sdk`` and ``websockets`` are imported only when the view starts: without them,
 or when the port cannot be bound, the error is logged naming the port, shown in the status,
 and the node serves on.

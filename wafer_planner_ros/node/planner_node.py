@@ -4,11 +4,11 @@ The planning node ``wafer_planner``: a thin ROS edge around the core.
 Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
 publishing: every callback is short), the worker's four (``worker``: one plans, one request
 at a time; one answers the station pairs the table holds; a watchdog answers ``TIMEOUT`` at
-every deadline; one loads or rebuilds the roadmap while the previous one serves; the
-compiled kernels release the GIL), the one loading the kernels from the process's start
-(``startup``; with one more saying when they are being compiled, if they must be), the
-recorder's (``node.recording``) and, with ``live.port`` set,
-the Foxglove server's (``live``). Requests are handed to the recording (which writes each
+every deadline; its loader's, ``loader``, loads or rebuilds the roadmap while the previous
+one serves; the compiled kernels release the GIL), the one loading the kernels from the
+process's start (``startup``; with one more saying when they are being compiled, if they
+must be), the recorder's (``node.recording``) and, with ``live.port`` set, the Foxglove
+server's (``live``, ``live_server``). Requests are handed to the recording (which writes each
 with its answers, a query whole in one file), read and checked in the subscription
 callback, then handed to the worker. The
 worker hands every answer back through a guard condition, so all publishing happens on the
