@@ -24,7 +24,7 @@ from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from wafer_planner_ros.node import live, markers
+from wafer_planner_ros.node import live_server, markers
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.recording.msgdefs import definition
 from wafer_planner_ros.service.settings import settings_from
@@ -496,14 +496,14 @@ def test_a_slow_client_loses_its_oldest_messages_its_outbox_bounded_in_bytes(mon
         # 64 MiB published at once to a client that reads nothing meanwhile.
         path = publishers[1]
         for k in range(64):
-            view.publish(path, bytes([k]) * live.MIB)
+            view.publish(path, bytes([k]) * live_server.MIB)
             queued = view._served._clients[0].queued
-            assert queued <= live.OUTBOX_BYTES, f'{queued} bytes wait for the client'
+            assert queued <= live_server.OUTBOX_BYTES, f'{queued} bytes wait for the client'
         assert len([w for w in warnings if 'reads too slowly' in w]) == 1, warnings
         received = []
         while not received or received[-1] != 63:
             frame = client.message()
-            assert frame[0] == MESSAGE_DATA and len(frame) == 13 + live.MIB
+            assert frame[0] == MESSAGE_DATA and len(frame) == 13 + live_server.MIB
             received.append(frame[13])
         # The newest ones, in order; of the rest, what was on its way when they came.
         assert received == sorted(received) and len(received) < 40, received
@@ -516,7 +516,7 @@ def test_a_slow_client_loses_its_oldest_messages_its_outbox_bounded_in_bytes(mon
 def test_a_client_that_takes_nothing_is_disconnected_and_logged(harness, monkeypatch):
     view = harness.node._live
     warnings = _warnings_of(view, monkeypatch)
-    monkeypatch.setattr(live, 'STALL', 1.0)
+    monkeypatch.setattr(live_server, 'STALL', 1.0)
     stalled = _Raw(harness.node.settings.live_port, receive_buffer=4096)
     try:
         # Asked for the 2 MB markers again and again (at most once a second), never reading.

@@ -181,7 +181,7 @@ def test_late_subscriber_gets_the_roadmap_markers(harness, default_cell):
 
 
 def test_services_answer(harness, monkeypatch, default_roadmap):
-    from wafer_planner_ros.node import worker
+    from wafer_planner_ros.node import loader
     status = harness.status()
     for key in ('ready', 'busy_with', 'cell', 'nodes', 'edges', 'hash', 'seed', 'queue',
                 'served', 'failed', 'last_error', 'rebuild_failed', 'last_rebuild_error'):
@@ -191,7 +191,7 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
                                                   default_roadmap.edge_count)
     assert not status['rebuild_failed'] and status['last_rebuild_error'] == ''
     release = threading.Event()
-    load_or_build = worker.load_or_build
+    load_or_build = loader.load_or_build
     loads = []
 
     def held(*args, **kwargs):  # a rebuild that lasts until the test has looked at it
@@ -199,7 +199,7 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
         release.wait(120)
         return load_or_build(*args, **kwargs)
 
-    monkeypatch.setattr(worker, 'load_or_build', held)
+    monkeypatch.setattr(loader, 'load_or_build', held)
     try:
         rebuilt = harness.call('rebuild_roadmap')
         assert rebuilt.success, rebuilt.message
@@ -232,7 +232,7 @@ def test_services_answer(harness, monkeypatch, default_roadmap):
 def test_a_failed_rebuild_keeps_serving_the_last_good_roadmap(harness, tmp_path, monkeypatch,
                                                               bad):
     from rclpy.parameter import Parameter
-    from wafer_planner_ros.node import worker
+    from wafer_planner_ros.node import loader
     before = harness.status()
     assert before['ready'] and not before['rebuild_failed']
     cell_file = tmp_path / f'{bad}.yaml'
@@ -244,7 +244,7 @@ def test_a_failed_rebuild_keeps_serving_the_last_good_roadmap(harness, tmp_path,
 
         def broken(*args, **kwargs):
             raise RuntimeError('no roadmap today')
-        monkeypatch.setattr(worker, 'load_or_build', broken)
+        monkeypatch.setattr(loader, 'load_or_build', broken)
         why = 'internal error: RuntimeError: no roadmap today'
     else:
         why = f'{cell_file}: cannot read: No such file or directory'

@@ -190,12 +190,12 @@ def test_a_rebuild_while_the_table_is_planned_is_queued_and_the_table_finished_a
     """Never refused: the table's planning stops after its pair, the load runs again."""
     import threading
     from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
-    from wafer_planner_ros.node import serving, worker
+    from wafer_planner_ros.node import loader, serving
     isolate_dds(tmp_path)
     cache = tmp_path / 'cache'
     shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
     release, planned, loads = threading.Event(), [], []
-    build_and_store_table, load_or_build = serving.build_and_store_table, worker.load_or_build
+    build_and_store_table, load_or_build = serving.build_and_store_table, loader.load_or_build
 
     def held(*args, **kwargs):  # the first pair is planned until the test has asked
         planned.append(len(loads))
@@ -207,7 +207,7 @@ def test_a_rebuild_while_the_table_is_planned_is_queued_and_the_table_finished_a
         return load_or_build(*args, **kwargs)
 
     monkeypatch.setattr(serving, 'build_and_store_table', held)
-    monkeypatch.setattr(worker, 'load_or_build', counted)
+    monkeypatch.setattr(loader, 'load_or_build', counted)
     node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
                     'planning.station_table_ports': False, 'planning.timeout': 30.0})
     try:

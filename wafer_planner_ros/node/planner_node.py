@@ -4,17 +4,18 @@ The planning node ``wafer_planner``: a thin ROS edge around the core.
 Threads: a single-threaded executor (subscriptions, services, the diagnostics timer,
 publishing: every callback is short), the worker's four (``worker``: one plans, one request
 at a time; one answers the station pairs the table holds; a watchdog answers ``TIMEOUT`` at
-every deadline; one loads or rebuilds the roadmap while the previous one serves; the
-compiled kernels release the GIL), the one loading the kernels from the process's start
-(``startup``; with one more saying when they are being compiled, if they must be), the
-recorder's (``node.recording``) and, with ``live.port`` set,
-the Foxglove server's (``live``). Requests are handed to the recording (which writes each
+every deadline; its loader's, ``loader``, loads or rebuilds the roadmap while the previous
+one serves; the compiled kernels release the GIL), the one loading the kernels from the
+process's start (``startup``; with one more saying when they are being compiled, if they
+must be), the recorder's (``node.recording``) and, with ``live.port`` set, the Foxglove
+server's (``live``, ``live_server``). Requests are handed to the recording (which writes each
 with its answers, a query whole in one file), read and checked in the subscription
 callback, then handed to the worker. The
 worker hands every answer back through a guard condition, so all publishing happens on the
 executor, each answer recorded before it goes out; each request gets exactly one
 ``~/result``, whatever happens: no request, however malformed, and no failure while
-answering it ends the node (a failure of the node's own is answered ``INTERNAL``).
+answering it ends the node (a failure of the node's own is answered ``INTERNAL``). What
+``/diagnostics`` says is ``health``'s; recording switched on and off, ``recording_switch``'s.
 """
 
 from collections import deque
@@ -27,14 +28,13 @@ import threading
 import time
 from typing import Optional
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
@@ -50,11 +50,14 @@ except ImportError:
 from wafer_planner_ros.errors import ErrorCode
 from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
+from wafer_planner_ros.node.health import diagnostics
 from wafer_planner_ros.node.live import LiveView
+from wafer_planner_ros.node.loader import QUEUED
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
+from wafer_planner_ros.node.recording_switch import RecordingSwitch
 from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
-from wafer_planner_ros.node.worker import PlanningWorker, QUEUED
+from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
@@ -117,7 +120,6 @@ class WaferPlannerNode(Node):
             String, '~/plan_station_request', self._on_station_request, RELIABLE, raw=True)
         self._numbers = itertools.count(1)
         self._late_records = 0
-        self._switching_recording = False
         self._recording = NodeRecording(self.get_name(), [
             Topic(self._joint_sub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
                   RELIABLE_OFFERED),
@@ -129,9 +131,10 @@ class WaferPlannerNode(Node):
             Topic(self._roadmap_pub.topic_name, 'visualization_msgs/msg/MarkerArray',
                   LATCHED_OFFERED)], self._roadmap_pub.topic_name, self._recording_failed,
             lambda: limits_of(self.settings))
+        self._switch = RecordingSwitch(self, self._recording)
         self._recording.parameters(self._parameter_values())
         if self.settings.recording_enabled:
-            self._start_recording()
+            self._switch.start()
         self.create_service(Trigger, '~/get_status', self._on_get_status)
         self.create_service(Trigger, '~/rebuild_roadmap', self._on_rebuild)
         self.create_service(SetBool, '~/set_recording', self._on_set_recording)
@@ -292,54 +295,8 @@ class WaferPlannerNode(Node):
 
     @guarded_service
     def _on_set_recording(self, request, response):
-        if request.data:
-            response.success = self._start_recording()
-            response.message = (f'recording to {self._recording.last_directory}'
-                                if response.success else self._recording.last_error)
-        else:
-            response.success, response.message = self._stop_recording()
-            self._log_closed(response.success, response.message)
-        self._sync_recording_enabled()
+        response.success, response.message = self._switch.switch(request.data)
         return response
-
-    def _sync_recording_enabled(self) -> None:
-        """Keep recording.enabled telling the truth (without switching a second time)."""
-        recording = bool(self._recording.status()['recording'])
-        if self.get_parameter('recording.enabled').value == recording:
-            return
-        self._switching_recording = True
-        try:
-            self.set_parameters([Parameter('recording.enabled', value=recording)])
-        finally:
-            self._switching_recording = False
-
-    def _log_closed(self, success: bool, message: str) -> None:
-        if message == 'not recording':
-            return
-        if not self.context.ok():  # after Ctrl-C or SIGTERM the logger cannot reach /rosout
-            print(f'[wafer_planner] {message}', file=sys.stderr, flush=True)
-        elif success:
-            self.get_logger().info(message)
-        else:
-            self.get_logger().error(message)
-
-    def _stop_recording(self) -> tuple:
-        """Close the recording; return (closed properly, a sentence saying so)."""
-        directory, error = self._recording.stop()
-        if directory is None:
-            return True, 'not recording'
-        if error:
-            return False, f'recording {directory} not closed properly: {error}'
-        return True, f'recording closed: {directory}'
-
-    def _start_recording(self) -> bool:
-        try:
-            directory = self._recording.start(self.settings.recording_directory)
-        except OSError as exc:
-            self.get_logger().error(f'{exc}; planning goes on without recording')
-            return False
-        self.get_logger().info(f'recording to {directory}')
-        return True
 
     def _recording_failed(self, message: str) -> None:
         self.get_logger().error(f'{message}; planning goes on without recording')
@@ -352,7 +309,7 @@ class WaferPlannerNode(Node):
 
     def _publish_health(self) -> None:
         try:
-            self._sync_recording_enabled()  # a recording that stopped by itself: false
+            self._switch.sync_enabled()  # a recording that stopped by itself: false
             health = self._health()
             self._diagnostics_pub.publish(health)
             self._live.publish(self._diagnostics_pub, health)
@@ -360,40 +317,7 @@ class WaferPlannerNode(Node):
             self.log.error(f'/diagnostics not published: {reason_of(exc)}')
 
     def _health(self) -> DiagnosticArray:
-        status = self.status()
-        if status['ready']:
-            level, message = DiagnosticStatus.OK, 'ready'
-            if status['rebuild_failed']:
-                level = DiagnosticStatus.WARN
-                message = (f"rebuild failed: {status['last_rebuild_error']}; serving the "
-                           f"previous roadmap {status['hash'][:12]}")
-            elif status['busy_with'] == 'kernels':
-                message = 'ready; loading the planning kernels and the station table'
-            elif status['busy_with'] == 'station_table':
-                message = 'ready; planning the station table'
-            elif status['busy_with'] == 'load':
-                message = 'ready; rebuilding the roadmap'
-        elif status['busy_with'] == 'load':
-            level, message = DiagnosticStatus.WARN, 'loading the roadmap'
-        else:
-            level = DiagnosticStatus.ERROR
-            message = f"roadmap not loaded: {status['last_rebuild_error']}"
-        if status['recording_error']:
-            level = max(level, DiagnosticStatus.WARN)
-            message += f"; {status['recording_error']}"
-        elif status.get('recording_stalled'):
-            level = max(level, DiagnosticStatus.WARN)
-            message += ('; recording stalled: the disk has not synced for 0.25 s, answers go '
-                        'out before they are on it')
-        keys = ('ready', 'nodes', 'edges', 'hash', 'station_table', 'station_table_empty',
-                'station_table_rejected', 'queue', 'served', 'failed', 'rebuild_failed',
-                'last_rebuild_error', 'recording', 'recording_directory', 'recording_error',
-                'recording_lost', 'answers_before_recorded')
-        health = DiagnosticStatus(level=level, name=f'{self.get_name()}: health',
-                                  message=message, hardware_id='wafer_planner',
-                                  values=[KeyValue(key=k, value=str(status.get(k, '')))
-                                          for k in keys])
-        array = DiagnosticArray(status=[health])
+        array = diagnostics(self.status(), self.get_name())
         array.header.stamp = self.get_clock().now().to_msg()
         return array
 
@@ -411,11 +335,8 @@ class WaferPlannerNode(Node):
             self.settings = settings  # read as a whole by the worker: no lock needed
             try:
                 self._recording.parameters(self._parameter_values(changed))
-                if 'recording.enabled' in changed and not self._switching_recording:
-                    if settings.recording_enabled:
-                        self._start_recording()
-                    else:
-                        self._log_closed(*self._stop_recording())
+                if 'recording.enabled' in changed:
+                    self._switch.follow(settings.recording_enabled)
             except Exception as exc:  # noqa: B902 - the parameters are set all the same
                 self.log.error(f'recording the parameters failed: {reason_of(exc)}')
             if any(name.startswith('live.') for name in changed):
@@ -428,7 +349,7 @@ class WaferPlannerNode(Node):
         self._worker.request_stop()
         # First: answers not yet published are not recorded either, and a plan or a
         # station table being planned is not waited for (``STOP_WAIT``).
-        self._log_closed(*self._stop_recording())
+        self._switch.stop()
         self._live.stop()
         self._worker.join(timeout=STOP_WAIT)
         super().destroy_node()
