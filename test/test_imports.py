@@ -1,4 +1,4 @@
-"""One-way imports: the layers and the ROS-free core, as setup.cfg's contracts state them."""
+"""One-way imports as setup.cfg's contracts state them (layers, a ROS-free core); small modules."""
 
 from pathlib import Path
 
@@ -14,3 +14,15 @@ def test_import_contracts_are_kept(capsys):
     out = capsys.readouterr().out
     assert code == 0, out
     assert 'Contracts: 3 kept, 0 broken.' in out
+
+
+MAX_MODULE_LINES = 450
+"""A module past this is holding more than one job: split it along a concept."""
+
+
+def test_no_module_is_longer_than_one_job_needs():
+    package = SETUP_CFG.parent / 'wafer_planner_ros'
+    long = {str(path.relative_to(package.parent)): lines
+            for path in sorted(package.rglob('*.py'))
+            if (lines := len(path.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert not long, f'modules over {MAX_MODULE_LINES} lines: {long}'
