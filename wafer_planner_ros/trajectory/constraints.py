@@ -3,17 +3,17 @@ The limits a motion keeps, as objects handed to the optimisers and the verificat
 
 One object per kind of limit, each with everything that limit means: the rows g >= 0 it
 gives an optimiser (with their exact Jacobians, compiled in ``rows``), the check the
-verification makes of it (the largest |value| / limit over the states checked), how that
-check scales when a curve is slowed (its order in time), and what bounds its rate where a
-check steps in between. What the optimiser keeps and what the verification checks are one
-definition, as toppra hands its algorithm a list of constraint objects.
+verification makes of it (the largest |value| / limit over the states checked), and how
+that check scales when a curve is slowed (its order in time). What the optimiser keeps and
+what the verification checks are one definition, as toppra hands its algorithm a list of
+constraint objects.
 
 - ``JointBound``: one derivative's limit per joint (velocity, acceleration, jerk), on the
   control points of that derivative (Eq. 6-8).
 - ``WaferBound``: the wafer-centre acceleration on x and y (and |a|) at samples (Eq. 9).
 - ``PositionBound``: the joint angles, as the bounds of the points the optimiser moves.
 - ``ClearanceBound``: the distance of each body to the walls and the port margins of a
-  motion model at samples, with the model's Lipschitz constants (what the proof steps by).
+  motion model at samples (the model's Lipschitz constants are what the proof steps by).
 
 ``limit_constraints`` makes a limit set's (``cell.limits``) list; the knot-time and the
 whole-curve problems take such a list, and ``verify`` checks the same objects. The
@@ -68,24 +68,11 @@ class JointBound:
     """(3,) per joint (rad/s^order)."""
     margin: float = 1.0
     """The share of the limit the optimiser's rows keep."""
-    next_limit: Optional[np.ndarray] = None
-    """(3,) the next derivative's limit, when the set has one: what bounds this ratio's
-    rate (``lipschitz``)."""
 
     @property
     def kept(self) -> np.ndarray:
         """Return the limit the rows keep: ``margin`` of it."""
         return self.margin * self.limit
-
-    @property
-    def lipschitz(self) -> Optional[float]:
-        """
-        Return the most this ratio can change per second on a curve within the next limit.
-
-        |d/dt q^(k)_i| / limit_i <= next_i / limit_i; None for the highest derivative
-        limited (nothing bounds its rate).
-        """
-        return None if self.next_limit is None else float(np.max(self.next_limit / self.limit))
 
     def row_count(self, points: int) -> int:
         """Return the rows of a curve of ``points`` control points."""
@@ -194,12 +181,9 @@ class ClearanceBound:
     """Each body's distance to the walls, and each port margin, of a motion model."""
 
     model: object
-    """A clearance model (``geometry.clearance``; with ports, ``geometry.ports``)."""
-
-    @property
-    def lipschitz(self) -> np.ndarray:
-        """Return (B, 3): how far body b can move per rad of joint j (the proof's bound)."""
-        return self.model.lipschitz
+    """A clearance model (``geometry.clearance``; with ports, ``geometry.ports``): its
+    ``lipschitz`` (B, 3) bounds how far each body moves per rad of each joint, what the
+    corridor and the proof step by."""
 
     def write_rows(self, padded, points, span, fraction, body, kept, columns, values,
                    jacobian, row: int) -> int:
@@ -231,8 +215,7 @@ def limit_constraints(limit_set: LimitSet, margin: float = 1.0) -> List:
     joints = limit_set.joints
     orders = [('velocity', joints.velocity), ('acceleration', joints.acceleration)] + (
         [('jerk', joints.jerk)] if joints.jerk is not None else [])
-    bounds: List = [JointBound(name, k + 1, np.asarray(limit, float), margin,
-                               orders[k + 1][1] if k + 1 < len(orders) else None)
+    bounds: List = [JointBound(name, k + 1, np.asarray(limit, float), margin)
                     for k, (name, limit) in enumerate(orders)]
     if limit_set.wafer is not None:
         bounds.append(WaferBound(np.asarray(limit_set.wafer.values, float), margin))
