@@ -7,5 +7,6 @@ line on the elbow branch, exactly (``channel``). Only its timing is free: a jerk
 profile along the axis (``timing``). A move from inside one port to inside another is that
 way out, a free transfer between the two port mouths, and that way in, joined at the mouth
 states (position, velocity, acceleration) into one curve (``through``); stopping at the
-mouths is the case of zero mouth speed.
+mouths is the case of zero mouth speed. How a move through a port is chosen among elbow
+branches and blended is ``planner.through``'s.
 """

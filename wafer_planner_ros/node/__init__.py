@@ -1,1 +1,13 @@
-"""The ROS 2 edge: the planning node, its messages, markers and client."""
+"""
+The ROS 2 edge: a thin node around the ROS-free core (the only subpackage importing rclpy).
+
+Where a change belongs: a topic, service or parameter of the node, ``planner_node`` (its
+health on ``/diagnostics``: ``health``; recording switched on and off: ``recording_switch``);
+the queues, deadlines and watchdog, ``worker``; loading the cell, roadmap, kernels and
+station table, ``loader``, then ``serving`` (a loaded roadmap taking over); what is
+published, ``messages`` and ``markers``; what is recorded, ``recording``; the Foxglove live
+view, ``live`` (the node's side) over ``live_server`` (the WebSocket protocol); the
+process and its start-up, ``main`` and ``startup``; failing safely, ``faults``; talking to a
+running node, ``client`` and ``replay_publish``. How a request is planned is not decided
+here but in ``service.planning``.
+"""

@@ -1,1 +1,11 @@
-"""The planner as a service, ROS-free: requests, the node's parameters, CDR encoding."""
+"""
+The planner as a service, ROS-free: the one policy by which every request is answered.
+
+Where a change belongs: how a request is answered (the station table first, a time budget,
+the curve method), ``planning``, used alike by the node, ``wafer-plan`` and
+``wafer-replay``; reading a request, ``requests``; the node's parameters, ``settings``; the
+station table, ``table`` (its build order ``table_build``, its file ``table_store``, an
+entry and its validation ``table_entry``); a curve of one limit set answering another,
+``adoption``; the swap cycle through the ports, ``cycle``; messages as bytes, ``cdr`` and
+``marker_cdr``; every kernel compiled before the first request, ``warmup``.
+"""
