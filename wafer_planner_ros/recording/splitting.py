@@ -21,7 +21,7 @@ from typing import Callable, Optional, Sequence, Tuple
 from wafer_planner_ros.recording import retention
 from wafer_planner_ros.recording.bag import BagWriter
 
-logger = logging.getLogger('wafer_planner_ros.recording.recorder')
+logger = logging.getLogger(__name__)
 """The recorder's: what splitting logs, the recording logs (a node's log names the logger)."""
 
 
