@@ -22,7 +22,6 @@ from wafer_planner_ros.recording import retention
 from wafer_planner_ros.recording.bag import BagWriter
 
 logger = logging.getLogger(__name__)
-"""The recorder's: what splitting logs, the recording logs (a node's log names the logger)."""
 
 
 class Splitter:
