@@ -37,7 +37,7 @@ from yaml.events import SequenceStartEvent, StreamEndEvent
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 
 MAX_BYTES = 4 * 1024 * 1024
-"""Largest cell file read (bytes); the default cell is about 1.5 KB."""
+"""Largest cell file read (bytes); the default cell is a few kilobytes."""
 MAX_NODES = 100_000
 """Most YAML nodes (scalars, lists, mappings) a file may expand to, aliases expanded."""
 MAX_DEPTH = 64

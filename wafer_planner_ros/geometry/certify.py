@@ -12,8 +12,8 @@ obstacle within nanometres) is rejected too, and so is one whose midpoint comes 
 segment that touches an obstacle at a single point (a link whose reach equals a wall's
 distance: its clearance 0 at one angle, growing with the square of the angle away from it)
 is otherwise refuted only when a midpoint lands on that point to the last bit, and the
-pieces near it, open all the while, double every other level (54 million evaluations and
-five minutes for one study variant's roadmap, against 0.2 million and a second). The
+pieces near it, open all the while, double every other level (one study variant's roadmap
+took minutes instead of a second: doc/how-it-works.md, "Certified edges"). The
 answer errs only towards "not certified". All segments are processed together, one
 vectorised clearance call per bisection level.
 """
@@ -24,8 +24,8 @@ DEFAULT_MAX_DEPTH = 30
 CONTACT = 1e-6
 """m: a midpoint this near an obstacle rejects its segment (as a collision does)."""
 MAX_OPEN = 4096
-"""Pieces of one segment open at one level beyond which the segment is rejected (of the
-packaged and test cells' roadmaps, one edge needs between 1,024 and 2,048)."""
+"""Pieces of one segment open at one level beyond which the segment is rejected (above
+what any edge of the packaged and test cells' roadmaps needs)."""
 
 
 def certify_segments(model, lipschitz: np.ndarray, qa: np.ndarray, qb: np.ndarray,

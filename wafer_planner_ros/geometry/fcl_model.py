@@ -8,11 +8,12 @@ much taller than the robot so that penetration is never reported along z.
 
 The prisms decide collision. Distances come from zero-radius capsules along the polygon
 edges instead: fcl measures capsule/sphere against capsule with exact closed-form routines,
-whereas its GJK distance from a capsule to a convex prism was measured 2e-5 m to 3.6e-3 m
-off (thin triangles being the worst). For a robot in free space the distance to the
-enclosure is the distance to its nearest edge, so both give the same quantity. This model is
-slow (Python-side transforms per query) and serves as the ground truth that the vectorised
-``clearance`` model and every published trajectory are checked against.
+whereas its GJK distance from a capsule to a convex prism is not exact (off by up to
+millimetres, thin triangles being the worst; doc/how-it-works.md). For a robot in free
+space the distance to the enclosure is the distance to its nearest edge, so both give the
+same quantity. This model is slow (Python-side transforms per query) and serves as the
+ground truth that the vectorised ``clearance`` model and every published trajectory are
+checked against.
 """
 
 import fcl

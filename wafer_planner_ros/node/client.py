@@ -23,8 +23,8 @@ from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.node.planner_node import RELIABLE
 
 DISCOVERY = 10.0
-"""s within which discovery finds a running node on the same domain (about 0.1 s on an
-idle machine's loopback; the margin is for a loaded one)."""
+"""s within which discovery finds a running node on the same domain (a small part of this
+on an idle machine's loopback; the margin is for a loaded one)."""
 
 
 class NoPlannerNode(WaferPlannerError):

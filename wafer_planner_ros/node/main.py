@@ -2,8 +2,8 @@
 ``wafer_planner_node``: the node's process, the compiled kernels loading from its first moment.
 
 The kernels load in a thread of their own (``startup.load_kernels``), started here before
-the node's own imports: the build made ahead of time takes a few milliseconds, numba's
-cache (when there is no build for this machine) about 0.7 s, longer than the rest of the
+the node's own imports: the build made ahead of time loads in milliseconds, but numba's
+cache (when there is no build for this machine) takes longer than all the rest of the
 start-up (imports, ROS, the roadmap from its cache). The node is ready when both are done.
 """
 

@@ -36,7 +36,7 @@ def kernels_announced(logger):
     Log, while the body runs, that the compiled kernels are being compiled, if they are.
 
     Loading them from numba's cache takes a fraction of a second; compiling them, when the
-    set-up did not (``wafer-kernels``), about 40 s: that is announced after
+    set-up did not (``wafer-kernels``), takes far longer: that is announced after
     ``ANNOUNCE_AFTER`` seconds, with progress every ``ANNOUNCE_EVERY`` seconds.
     """
     done, begun, before = threading.Event(), time.monotonic(), kernels.compiled_count()
@@ -174,8 +174,8 @@ def import_for_planning() -> None:
     """
     Import what the first plans import when used (scipy's trees and graphs).
 
-    About 0.3 s of imports that the planner leaves to its first use, so that a tool that
-    never plans does not pay them: the node does them once it is ready, before the markers,
+    Imports slow enough to notice, which the planner leaves to its first use so that a tool
+    that never plans does not pay them: the node does them once it is ready, before the markers,
     so that the first requests find them done (with numba loaded from its cache instead of
     the build ahead of time, numba has imported much of scipy already).
     """

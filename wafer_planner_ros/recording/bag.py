@@ -10,7 +10,7 @@ Foxglove and the independent ``rosbags`` library read it: a directory ``<bag>/``
 the YAML of the bag as it was when the file was finished. Every finished file is a
 complete, indexed MCAP file that can be read alone. Chunks are zstd-compressed, as
 rosbag2's ``zstd_fast`` storage preset writes them and every MCAP reader reads them: the
-roadmap markers shrink from 2.0 MB to 0.16 MB, a trajectory by about a third.
+roadmap markers shrink to a small part of their size, a trajectory less.
 """
 
 from dataclasses import dataclass, field

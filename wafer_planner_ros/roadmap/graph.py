@@ -14,7 +14,7 @@ STATION_SAMPLER = -1  # sampler index stored for station nodes
 
 
 MAX_NODES = 200000
-"""The largest roadmap (about 6 million edges and 2 GB while it is built)."""
+"""The largest roadmap (millions of edges and gigabytes of memory while it is built)."""
 MAX_SEED = 2 ** 31 - 1
 """Seeds are 0 to this (a ROS integer parameter holds them)."""
 
@@ -101,7 +101,7 @@ class Roadmap:
         return len(self.edges)
 
     @functools.cached_property
-    def graph(self) -> 'csr_matrix':  # noqa: F821 - scipy: imported when used (0.17 s)
+    def graph(self) -> 'csr_matrix':  # noqa: F821 - scipy: imported when used (slow)
         """Return the symmetric adjacency matrix weighted by edge length."""
         from scipy.sparse import csr_matrix
         i, j = self.edges[:, 0], self.edges[:, 1]

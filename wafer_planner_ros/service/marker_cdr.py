@@ -1,8 +1,8 @@
 """
 The CDR bytes of a ``visualization_msgs/msg/MarkerArray`` (ROS 2 Jazzy), from numpy arrays.
 
-A roadmap's markers hold some 80,000 points: building a ``geometry_msgs/Point`` for each and
-letting rclpy convert them took half a second, while the points of a marker are one block
+A roadmap's markers hold tens of thousands of points: building a ``geometry_msgs/Point`` for
+each and letting rclpy convert them is slow, while the points of a marker are one block
 of float64 triples in the message. ``Marker`` holds a marker's fields with its points,
 colours and texture coordinates as arrays, and ``marker_array`` writes the bytes
 (``Publisher.publish`` takes them as they are; the recorder records the same bytes) with

@@ -15,11 +15,11 @@ once):
   station pair the table does not hold, or not yet: it is being planned) gets the
   whole-curve optimisation for at most the budget, and never more than half of what is left
   before ``deadline``, so that the verification and the answer keep their time; the best
-  proven curve by then. When it has proven none by then (about one joint request in
-  eight, on the default cell), the coarse stage runs on to its first proven curve, a few
-  per cent from the optimum, up to half-way to ``deadline``; only if it proves none by
-  then is the answer the corridor curve (timed until it converges or half-way to what is
-  left), 1.5-3.5 x slower than the optimum. A budget below ``MIN_BUDGET`` (or 0) gives
+  proven curve by then. When it has proven none by then (some joint requests; how many:
+  doc/benchmark.md), the coarse stage runs on to its first proven curve, close to the
+  optimum, up to half-way to ``deadline``; only if it proves none by then is the answer
+  the corridor curve (timed until it converges or half-way to what is left), far slower
+  than the optimum. A budget below ``MIN_BUDGET`` (or 0) gives
   the corridor curve, which takes milliseconds.
 
 A budgeted answer names its budget (``metrics['budget']``). Its cycle time depends on how

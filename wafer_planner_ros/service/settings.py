@@ -29,7 +29,7 @@ class Parameter(NamedTuple):
 
 MIB = 1 << 20
 MIN_BAG_SIZE = MIB
-"""Bytes: room for what every file begins with (the roadmap markers take 0.16 MB)."""
+"""Bytes: room for what every file begins with (the compressed roadmap markers, mostly)."""
 MAX_BAG_SIZE = 1 << 50
 MIN_BAG_DURATION = 1.0
 MAX_BAG_DURATION = 10 * 365 * 86400.0

@@ -3,8 +3,8 @@ The whole-curve optimisation's coarse stage: a curve of few spans, fitted to the
 
 **Beyond the paper.** The whole-curve optimisation costs its iterations times the size of
 its problem, and the corridor curve it used to start from has as many spans as the corridor
-has control points (16-40 on the test cells' station pairs) and a cycle time about twice
-the optimum's. So the curve is first optimised with few spans (``ShapeSettings.coarse_spans``):
+has control points (tens on the test cells' station pairs) and a cycle time far from the
+optimum's. So the curve is first optimised with few spans (``ShapeSettings.coarse_spans``):
 a clamped cubic B-spline with that many uniform spans, fitted by least squares to the
 corridor's control polygon (at rest at both ends: three equal control points each), where
 the polygon is parametrised by the square root of each side's length (a side is crossed in

@@ -224,13 +224,13 @@ class WholeCurve(KnotTiming):
         if coarse.trajectory is not None and coarse.trajectory.duration >= start.estimate:
             coarse = replace(coarse, trajectory=None)  # no faster than the corridor's start
         # The corridor curve is what is returned then: its timing may take longer than the
-        # budget (its λ-scaled start is up to 10 x slower), up to half-way to the deadline.
+        # budget (its λ-scaled start can be far slower), up to half-way to the deadline.
         fitted = coarse.trajectory is not None
         shaped = None
         if not fitted and coarse.unproven is not None:
             # Its last optimum lies millimetres into a wall between its samples: the fine
             # stage's spans and samples prove it or a curve near it in a round or two,
-            # where from the corridor curve (1.5-3.5 x slower) its subproblems fail for
+            # where from the corridor curve (far slower) its subproblems fail for
             # rounds on end.
             shaped = optimise_shape(coarse.unproven, self.cell, fine, self.settings,
                                     give_up_above, until, proven=False, keep_out=keep_out)
@@ -317,8 +317,9 @@ def _keeps_out(until: Optional[float], deadline: Optional[float]) -> bool:
     Return whether the rows keep the discs round other ports' mouths: not within a budget.
 
     A budgeted answer is the first proven curve, and pushing a start out of a disc costs
-    rounds it does not have: within the node's budget, the default cell's loadport1 ->
-    loadlock2 came to 1.057 x its unbudgeted cycle time with the discs, 1.0007 x without.
+    rounds it does not have: within the node's budget, a move past another port's mouth
+    came out several per cent slower than unbudgeted with the discs, within rounding of
+    it without.
     """
     return until is None and deadline is None
 
@@ -328,9 +329,9 @@ def _past_budget(until: Optional[float], deadline: Optional[float]) -> Optional[
     Return when the coarse stage stops: with a budget (``until``), at its first proven curve.
 
     Not at the budget's end, but half-way to the request's ``deadline`` at the latest
-    (without one, never): until it proves one, there is only the corridor curve, 1.5-3.5 x
-    slower than the optimum, while a coarse curve proven late is a few per cent from it
-    (the fine stage then returns it as it is). None without a budget.
+    (without one, never): until it proves one, there is only the corridor curve, far
+    slower than the optimum, while a coarse curve proven late is close to it (the fine
+    stage then returns it as it is). None without a budget.
     """
     if until is None:
         return None

@@ -22,8 +22,8 @@ to every limit) or a curve fitted to the corridor (``coarse``: not proven, so ne
 returned), or the optimum of that coarse stage; its knot vector is refined first where it
 has few spans. SLSQP's method
 solves with exact gradients (``shape_problem``; clearance from the closest points and the
-body Jacobian), its quadratic subproblems by daqp (``sqp``): about 1 ms an iteration for 16
-spans, where scipy's SLSQP took 4-6 ms (one BLAS thread) or 15-30 ms (two).
+body Jacobian), its quadratic subproblems by daqp (``sqp``), several times faster an iteration
+than scipy's SLSQP.
 Each answer is scaled by its own λ (Eq. 12) to meet every limit everywhere (and slowed
 further where it still exceeds one at the verification's times, ``meet_limits``), then
 proven collision-free; where a piece cannot be proven, clearance samples are added there,
@@ -135,8 +135,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             message = f'solver failed: {result.message}'
             break
         if intervals.sum() > FAILED_SLOWER * problem.start.duration:
-            # A failed solve can end anywhere: 11,712,504 s from a 5 s start once, whose
-            # dense check alone would have taken 87 GiB.
+            # A failed solve can end anywhere: once months of motion from a start of
+            # seconds, whose dense check alone would not have fit in memory.
             message = (f'solver failed: {result.message} (its answer takes '
                        f'{intervals.sum():.4g} s)')
             break
@@ -155,7 +155,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             if problem.total_of(points, scaled) >= problem.total(reference):
                 # Scaled, it cannot be kept: not checked every millisecond as a curve that
                 # may be kept is, which costs time in proportion to its length (an answer
-                # stopped mid-solve, far over the limits, scaled to 4,825 s: 2.4 s).
+                # stopped mid-solve, far over the limits, can scale to an hour's motion).
                 if deadline is not None and time.monotonic() >= deadline:
                     message = 'the time budget ran out'
                     break
@@ -293,12 +293,12 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     Run SLSQP's method (``sqp``) from ``start``: durations relative to the start's.
 
     The free control points are bounded by the position limits, ``PositionBound.margin``
-    inside (the QP's simple bounds: bounding only those near a limit and the rest when
-    they crossed one took 1.4 x as long over the default cell's station pairs, solving
-    some rounds twice); at ``deadline`` (``time.monotonic()``) it stops where it is. Rows
-    are weighted to norm 1 near the start, rows that do not depend on the variables
-    dropped: with Jacobian entries from 1e-11 to 1e3 SLSQP's subproblem took 4.5 x as long
-    per iteration (29 ms against 6.5 ms, 55 variables, 253 rows).
+    inside (the QP's simple bounds: bounding only those near a limit, and the rest when
+    they crossed one, was slower, solving some rounds twice); at ``deadline``
+    (``time.monotonic()``) it stops where it is. Rows are weighted to norm 1 near the
+    start, rows that do not depend on the variables dropped: unweighted, with Jacobian
+    entries many orders of magnitude apart, SLSQP's subproblem took several times as long
+    per iteration.
     """
     single_blas_thread()
     scale = start.intervals.copy()

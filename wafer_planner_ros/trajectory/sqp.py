@@ -10,9 +10,8 @@ ten times (by quadratic interpolation, never below a tenth of the last step), an
 stopping rule (|f - f_previous| < acc with constraint violation < acc). What differs:
 
 - the subproblem is solved by daqp (a dual active-set QP solver; dense, for a positive
-  definite B) warm-started from the last active set, instead of SLSQP's LSQ/NNLS; on
-  the default cell's 16-span problems (55 variables, 270-330 rows) it takes 0.5 ms
-  where SLSQP's subproblem took 2.5-3 ms (one BLAS thread) or 15-25 ms (two);
+  definite B) warm-started from the last active set, instead of SLSQP's LSQ/NNLS,
+  several times faster on the default cell's problems;
 - every step is clipped to the bounds, which daqp meets within its tolerance only;
 - an inconsistent linearisation is relaxed by one variable delta in [0, 1] that scales the
   violated rows (SLSQP's device), penalised by ``RELAX_PENALTY``.
@@ -32,8 +31,9 @@ RELAX_PENALTY = 100.0
 LINE_SEARCH_CUTS = 10
 ARMIJO = 0.1
 QP_ITERATIONS = 400
-"""daqp iterations per subproblem at most (the 16-span problems need 10-200; a few of 28-46
-spans need thousands, 1 s each: those are relaxed, then the solve stops)."""
+"""daqp iterations per subproblem at most: more than the 16-span problems need; the few
+larger ones that would need far more, each slow, are relaxed instead, then the solve stops
+(doc/benchmark.md)."""
 
 
 @dataclass(frozen=True, eq=False)

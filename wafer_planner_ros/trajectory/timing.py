@@ -8,8 +8,7 @@ Variables: the durations h of the spline's spans. Objective: the total time sum(
 - joint velocity and acceleration control points (Eq. 6-8), and jerk control points when
   the cell sets a jerk limit; by the convex-hull property these bound the curve everywhere.
   Those below 70 % of their limit are left out of the solver (an active set) and added
-  back when a solution brings them closer (measured on the 25 largest of 108 problems:
-  the same cycle times as with 30 %, 30 % faster);
+  back when a solution brings them closer (``TimingSettings.active``);
 - the wafer-centre acceleration on x and y (Eq. 9), and on |a| when the cell sets
   ``wafer_acceleration_norm_limit``, at constraint samples: the paper's, at every knot;
 - ``h >= min_interval``: Eq. 10 as printed would force every span to last the whole
@@ -21,9 +20,8 @@ The start point is the paper's λ-scaled uniform timing (Eq. 12), with λ comput
 dense sample of the wafer acceleration, and slowed further where it still exceeds a limit
 at the verification's own times (``TimingProblem.meet_limits``), so that it is feasible
 everywhere; SLSQP's method then solves with exact gradients (compiled, ``rows``), as
-``sqp`` runs it (daqp for the subproblems: on the default cell's 12 station pairs and 30
-random joint pairs, scipy's SLSQP gave the same cycle times, median ratio 1.0000, range
-0.986-1.006, in 1.25 x the planning time per pair, median). The control-point
+``sqp`` runs it (daqp for the subproblems: the same cycle times as scipy's SLSQP, in less
+time; doc/benchmark.md). The control-point
 rows are Eq. 6-7 differentiated in closed form; a wafer sample in span s depends on
 h_{s-2}..h_{s+2} only, and its derivatives come by the complex step on the spline's basis
 (every function is analytic, so ``Im B(h + i ε e_k) / ε`` is dB/dh_k to machine precision
@@ -41,8 +39,7 @@ nothing usable is the λ-scaled start returned, with the reason. At a deadline t
 stops where it is, and that answer, scaled the same way, is kept if it is the fastest: any
 timing scaled by its own λ meets every limit, so the optimisation can stop at any
 iteration. Mid-solve answers, which break limits, often scale back to the start's cycle
-time or slower (two station pairs of the default cell: stopped after 5, 10 or 20
-iterations, none beat the start; after 30-80, 6 of 8 did): a converged round is what pays.
+time or slower, the earlier they are stopped: a converged round is what pays.
 
 Limits are tightened by ``margin`` inside the optimiser so that what lies between dense
 samples stays below the true limits that verification applies.
@@ -136,10 +133,9 @@ def single_blas_thread():
     """
     Have BLAS (OpenBLAS under numpy and scipy) use one thread in this process, once.
 
-    The optimisers' problems are small (tens of variables, hundreds of rows): with the two
-    threads OpenBLAS starts by default, SLSQP took 5-15 x as long per solve on the 2-core
-    machine (1.75-5.9 s against 0.29-1.2 s per branch combination of the whole-curve
-    optimisation), and the threads it spins also slow every other thread of the node.
+    The optimisers' problems are small (tens of variables, hundreds of rows): the two
+    threads OpenBLAS starts by default made each solve several times slower on the 2-core
+    machine, and the threads it spins also slow every other thread of the node.
     """
     return threadpool_limits(limits=1, user_api='blas')
 
@@ -150,8 +146,8 @@ def _solve(problem: TimingProblem, start: np.ndarray, samples: Samples, rows,
     Run SLSQP's method (``sqp``) from ``start``, until ``deadline`` at most.
 
     The variables are the durations relative to ``start`` (all 1 at the start), which suits
-    the initial identity Hessian: measured with scipy's SLSQP on 30 random queries, 17 %
-    fewer iterations and slightly shorter cycle times than with the durations themselves.
+    the initial identity Hessian: fewer iterations and slightly shorter cycle times than
+    with the durations themselves.
     The result's ``intervals`` are the durations (s).
     """
     single_blas_thread()

@@ -188,7 +188,7 @@ class TimingProblem:
         The limits are checked on the curve itself, at the verification's own times and by
         its own ratios (``verify.limit_ratios``): Eq. 12 takes the wafer acceleration at
         dense instants of the timing before it is scaled, λ times as far apart once it is,
-        and a peak between them can exceed the limit (a start of λ = 34 by 0.02 %). Each
+        and a peak between them can exceed the limit (slightly). Each
         limit over 1 slows the curve so that its ratio, of order k in time
         (``constraints.ratio_orders``), comes to ``margin``: by (ratio / margin) ** (1 / k);
         the check is repeated, ``limit_tries`` times at most (the last slowing is then

@@ -1,4 +1,13 @@
-"""The time optimiser's tuning: one frozen set of values, the defaults measured to pay."""
+"""
+The optimisers' tuning: one frozen set of settings each, and why each default is what it is.
+
+``TimingSettings`` tunes the knot-time optimiser (``trajectory.timing``), and the
+whole-curve optimiser where it takes the same steps (the margin, the dense check, giving
+up); ``ShapeSettings`` tunes the rest of the whole-curve optimiser (``trajectory.shape``).
+Each setting says what it does and why its default is the one that pays; the experiments
+that chose the defaults, with their figures, are in doc/benchmark.md ("How the optimisers'
+defaults were chosen").
+"""
 
 from dataclasses import dataclass
 
@@ -16,9 +25,10 @@ class TimingSettings:
     """s: the shortest span when the cell limits jerk (Eq. 10 read as a small positive lower
     bound; the jerk control points keep spans from collapsing)."""
     min_interval_without_jerk: float = 0.02
-    """s: the shortest span when the cell does not limit jerk. Spans of 1 ms let the
-    acceleration step within 1 ms (11,800 rad/s^3 measured); at 20 ms a step of the whole
-    acceleration range takes 20 ms or more."""
+    """s: the shortest span when the cell does not limit jerk. Then nothing else keeps the
+    acceleration from stepping within one span, and spans as short as ``min_interval`` let
+    it jump at a jerk no drive gives; with spans this long a step of the whole acceleration
+    range takes at least this long."""
 
     def shortest(self, robot) -> float:
         """Return the shortest span (s) for ``robot``: with or without a jerk limit."""
@@ -30,8 +40,8 @@ class TimingSettings:
     """Checks on the verification's own times at most in slowing a timing until it meets
     every limit (``TimingProblem.meet_limits``); one slowing is almost always enough."""
     max_rounds: int = 4
-    """Solves with added samples at most (8 gave cycles at most 0.55 % shorter on 108
-    problems, at 1.4 x the time)."""
+    """Solves with added samples at most: further rounds shorten the cycle only slightly,
+    for much more planning time."""
     samples_per_span: int = 1
     """Wafer-acceleration samples per span in the first round (1: the paper's, every knot)."""
     rescale_tolerance: float = 1e-3
@@ -40,10 +50,14 @@ class TimingSettings:
     """s: SLSQP's stopping precision on the total time."""
     give_up_margin: float = 0.02
     """A round's optimum this much above the best so far gives the problem up. More samples
-    only add constraints, so a round's optimum is about a lower bound of the final one: on
-    the 3 test cells' station pairs it was at most 0.4 % above it."""
+    only add constraints, so a round's optimum is about a lower bound of the final one: it
+    has come out above the final one by far less than this margin, so it stops only
+    problems that cannot win."""
     active: float = 1.0 - 0.7 ** 2
-    """Control-point constraints at 70 % of their limit or more are kept in the solver."""
+    """Control-point constraints at 70 % of their limit or more are kept in the solver; the
+    others are left out (an active set) and added back when an answer brings them closer.
+    Fewer rows make each subproblem cheaper: the same cycle times as keeping more of them,
+    in less time."""
     max_iterations: int = 200
     """SLSQP iterations per round at most."""
 
@@ -57,19 +71,18 @@ class ShapeSettings:
     spans: a straight two-vertex path has only four, too few to shape."""
     coarse_spans: int = 8
     """Spans of the coarse stage (``coarse``), whose optimum starts the fine one; a path
-    with more vertices gets one span per vertex (``methods.WholeCurve``). Over the
-    98 elbow-branch combinations of the 3 test cells' station pairs (roadmap seed 1, none
-    given up), the two stages took 17 s in all where one stage from the corridor curve
-    took 73 s, for the same fastest curve per pair within rounding (cycle time ratio:
-    median 1.000, worst 1.003)."""
+    with more vertices gets one span per vertex (``methods.WholeCurve``). Its subproblems
+    are small, and its optimum starts the fine stage so near the answer that the two stages
+    take far less time than one stage from the corridor curve, for the same fastest curve
+    per pair."""
     qp_iterations: int = QP_ITERATIONS
     """daqp iterations per subproblem at most (``sqp``)."""
     coarse_give_up: float = 1.15
     """A coarse optimum this many times the best cycle time so far gives the combination up
-    (``give_up_above``, plus ``TimingSettings.give_up_margin``: 1.173 x, after a converged
-    round). On those 98 combinations the coarse stage, stopped at its first proven curve,
-    ended at most 1.166 x the best cycle time of its pair for the combination that won
-    (median 1.12 x its own fine optimum, at most 1.43 x): a close margin."""
+    (``give_up_above``, plus ``TimingSettings.give_up_margin`` after a converged round). A
+    coarse optimum lies above the fine one it leads to, often well above; the winning
+    combinations' coarse stages have stayed just below where they would be given up: a
+    close margin, which gives up the hopeless combinations early and no winner."""
     wafer_samples: int = 3
     """Wafer-acceleration samples per span in the first round."""
     clearance_samples: int = 4
@@ -83,10 +96,9 @@ class ShapeSettings:
     port_keep_out: float = 0.02
     """m: the rows keep the wafer centre this far from the mouth of every port the curve
     neither leaves nor enters, where it is turned from that port's heading (a disc round
-    the tip of the port's wedge, ``geometry.ports``; the proof keeps the rule itself). On
-    the notched test cell an empty move from loadport1 into loadlock1 sweeps past
-    loadlock2's mouth with its blade turned; without the disc its optimum sat on the
-    wedge's tip, a corner the optimiser cut between its samples round after round. Where
+    the tip of the port's wedge, ``geometry.ports``; the proof keeps the rule itself).
+    Without the disc, an optimum that sweeps past a mouth with the blade turned sits on the
+    wedge's tip, a corner the optimiser cuts between its samples round after round. Where
     the start already comes that near a mouth, turned, the coarse stage is also tried
     under the rule alone (``methods.WholeCurve.finish``); within a time budget the rule
     alone is kept throughout."""
@@ -99,8 +111,6 @@ class ShapeSettings:
     ftol: float = 1e-4
     """s: SLSQP's stopping precision on the total time."""
     budget_ftol: float = 1e-3
-    """s: the same within a time budget. On 60 random joint requests of the default cell it
-    took the median planning time from 284 ms to 186 ms for a median cycle time 0.24 %
-    longer; with a 0.12 s budget the median answer then came within 0.7 % of the
-    unbudgeted one (within 5 % at 1e-4). Unbudgeted work (the station table) keeps
-    ``ftol``."""
+    """s: the same within a time budget. A coarser precision ends each solve sooner, for a
+    cycle time only a fraction of a per cent longer: within a budget the time matters more
+    than that last fraction. Unbudgeted work (the station table) keeps ``ftol``."""
