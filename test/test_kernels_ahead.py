@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from wafer_planner_ros import kernels, kernels_ahead, kernels_keys
+from wafer_planner_ros import kernels, kernels_ahead, kernels_keys, kernels_lookup
 from wafer_planner_ros.node import startup
 from wafer_planner_ros.service import warmup  # noqa: F401 - every kernel, as the node has them
 from wafer_planner_ros.trajectory import bspline
@@ -21,9 +21,9 @@ _PLAN = """
 import json, sys, threading, time
 import numpy as np
 import pytest
-from wafer_planner_ros import kernels
+from wafer_planner_ros import kernels, kernels_lookup
 from wafer_planner_ros.service import warmup
-loaded = kernels.load_ahead() if sys.argv[1] == 'ahead' else kernels.load_cached()
+loaded = kernels_lookup.load_ahead() if sys.argv[1] == 'ahead' else kernels.load_cached()
 from dataclasses import replace
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.planner import Planner, PlannerSettings
@@ -73,8 +73,8 @@ def _plan(source: str) -> dict:
 @pytest.mark.slow
 def test_the_build_loads_without_numba_plans_as_numba_does_and_releases_the_gil():
     # The set-up (wafer-kernels) built them for this machine.
-    assert (kernels.ahead_directory() / kernels_keys.AHEAD_MANIFEST).exists(), \
-        f'no build in {kernels.ahead_directory()}: run wafer-kernels'
+    assert (kernels_lookup.ahead_directory() / kernels_keys.AHEAD_MANIFEST).exists(), \
+        f'no build in {kernels_lookup.ahead_directory()}: run wafer-kernels'
     ahead, cached = _plan('ahead'), _plan('cached')
     assert ahead['loaded'] > 0 and cached['loaded'] > 0
     # Both methods, a station pair and a joint pair, the roadmap built: no numba at all.
@@ -91,10 +91,10 @@ def test_a_call_of_types_not_built_runs_numba_with_the_same_answer():
 import sys
 import numpy as np
 import pytest
-from wafer_planner_ros import kernels, kernels_keys
+from wafer_planner_ros import kernels, kernels_keys, kernels_lookup
 from wafer_planner_ros.service import warmup
 from wafer_planner_ros.trajectory import bspline
-assert kernels.load_ahead() > 0
+assert kernels_lookup.load_ahead() > 0
 intervals = np.array([0.5, 0.25, 0.75, 1.0, 0.125, 2.0])
 # Built for a writeable C-ordered float64 vector only (numba's cache may hold more, which
 # a build takes too): every other type is not built.
@@ -142,33 +142,33 @@ def test_the_polygon_kernels_are_left_to_numba_and_the_rest_built():
 
 def test_a_build_of_other_kernels_or_a_broken_manifest_is_not_loaded(tmp_path, monkeypatch):
     monkeypatch.setenv('NUMBA_CACHE_DIR', str(tmp_path))
-    with pytest.raises(kernels.NoBuildAhead, match='none built for this machine'):
-        kernels.load_ahead()
-    manifest = kernels.ahead_directory() / kernels_keys.AHEAD_MANIFEST
+    with pytest.raises(kernels_lookup.NoBuildAhead, match='none built for this machine'):
+        kernels_lookup.load_ahead()
+    manifest = kernels_lookup.ahead_directory() / kernels_keys.AHEAD_MANIFEST
     manifest.parent.mkdir(parents=True)
     manifest.write_text('{not json')
     with pytest.raises(OSError, match='is not a build manifest'):
-        kernels.load_ahead()
+        kernels_lookup.load_ahead()
     modules = ['wafer_planner_ros.trajectory.bspline']
     manifest.write_text(json.dumps({'file': 'absent.so', 'modules': modules, 'kernels': {},
-                                    'digest': kernels.kernels_digest(modules)}))
+                                    'digest': kernels_lookup.kernels_digest(modules)}))
     with pytest.raises(ImportError):  # what it names is not there
-        kernels.load_ahead()
+        kernels_lookup.load_ahead()
     # A constant a kernel uses changed: the kernels' code is not what was built.
     monkeypatch.setattr(bspline, 'WINDOW', bspline.WINDOW + 1)
-    with pytest.raises(kernels.NoBuildAhead, match='the kernels changed since the build'):
-        kernels.load_ahead()
+    with pytest.raises(kernels_lookup.NoBuildAhead, match='the kernels changed since the build'):
+        kernels_lookup.load_ahead()
     manifest.write_text(json.dumps({'file': 'absent.so', 'modules': ['wafer_planner_ros.gone'],
                                     'kernels': {}, 'digest': ''}))
-    with pytest.raises(kernels.NoBuildAhead, match='no longer has'):
-        kernels.load_ahead()
+    with pytest.raises(kernels_lookup.NoBuildAhead, match='no longer has'):
+        kernels_lookup.load_ahead()
 
 
 def test_the_node_loads_numbas_cache_when_the_build_does_not_load(monkeypatch, caplog):
     def broken():
         raise ImportError('a build that does not load')
 
-    monkeypatch.setattr(kernels, 'load_ahead', broken)
+    monkeypatch.setattr(kernels_lookup, 'load_ahead', broken)
     loading = startup._KernelLoading()
     logger = logging.getLogger('test_kernels_ahead')
     with caplog.at_level(logging.INFO, logger='test_kernels_ahead'):

@@ -2,11 +2,11 @@
 The kernels built ahead of time: one extension module for this machine, loaded without numba.
 
 Loading numba and the kernels from its cache takes long at every start; the module this
-builds loads far sooner, without numba (``kernels.load_ahead``). :func:`build` takes
+builds loads far sooner, without numba (``kernels_lookup.load_ahead``). :func:`build` takes
 every signature the process has of each kernel (compiled or loaded from numba's cache: after
 ``service.warmup.compile_kernels``, those the planner calls) and compiles them with numba's
 ahead-of-time compiler (``numba.pycc``) for this processor into
-``kernels.ahead_directory()``, with a manifest of which function is which kernel for which
+``kernels_lookup.ahead_directory()``, with a manifest of which function is which kernel for which
 argument types (``kernels_keys.argument_types``). It needs a C compiler.
 
 Left to numba: the kernels that reach ``objmode`` (the exact orientation test's slow path
@@ -32,7 +32,7 @@ import time
 from typing import Callable, Dict, List, Optional, Tuple
 import warnings
 
-from wafer_planner_ros import kernels, kernels_keys
+from wafer_planner_ros import kernels, kernels_keys, kernels_lookup
 
 
 def buildable(every: List[kernels.Kernel]) -> Tuple[List[kernels.Kernel], List[kernels.Kernel]]:
@@ -101,12 +101,12 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
             if k.__module__.split('.')[0] == kernels.__name__.split('.')[0]]
     modules = sorted({k.__module__ for k in ours})
     identity = kernels_keys.ahead_identity()
-    directory = kernels.ahead_directory(identity)
+    directory = kernels_lookup.ahead_directory(identity)
     built, left = buildable(ours)
     found = {'directory': str(directory), 'left': [k.__qualname__ for k in left]}
     try:
-        manifest = kernels.ahead_manifest()
-    except (kernels.NoBuildAhead, OSError):
+        manifest = kernels_lookup.ahead_manifest()
+    except (kernels_lookup.NoBuildAhead, OSError):
         pass
     else:
         return {**found, 'built': False, 'seconds': time.monotonic() - begun,
@@ -149,7 +149,7 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
         except Exception as exc:  # noqa: B902 - numba's, the C compiler's: said as one
             raise RuntimeError(f'the ahead-of-time build failed: {exc}') from exc
         manifest = {'file': compiler.output_file, 'modules': modules,
-                    'digest': kernels.kernels_digest(modules), 'kernels': table,
+                    'digest': kernels_lookup.kernels_digest(modules), 'kernels': table,
                     'left_to_numba': found['left'], 'identity': identity}
         (staging / kernels_keys.AHEAD_MANIFEST).write_text(json.dumps(manifest, indent=1))
         _install(staging, directory)

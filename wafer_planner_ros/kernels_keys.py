@@ -8,7 +8,7 @@ built for, so a call runs it only when ``argument_types`` of its arguments is on
 (``kernels.Kernel``); and a build runs only on the Python, numpy and numba it was built with,
 on the same processor (``ahead_identity``: the build's directory is named by it). What it
 was built from, the kernels' code and the constants it uses, is checked on load
-(``kernels.kernels_digest``, from ``global_names`` and ``file_digest``).
+(``kernels_lookup.kernels_digest``, from ``global_names`` and ``file_digest``).
 
 Nothing here imports numba: reading the build's keys must not cost numba's import.
 """

@@ -14,7 +14,7 @@ import argparse
 import sys
 import time
 
-from wafer_planner_ros import kernels, kernels_ahead
+from wafer_planner_ros import kernels, kernels_ahead, kernels_lookup
 from wafer_planner_ros.cli.common import EXIT_FAILURE, EXIT_OK, run
 from wafer_planner_ros.service.warmup import compile_kernels
 
@@ -31,8 +31,8 @@ def main(argv=None) -> int:
     missing = kernels.uncached()
     where = kernels.cache_root()
     try:
-        manifest, unbuilt = kernels.ahead_manifest(), ''
-    except (kernels.NoBuildAhead, OSError) as exc:
+        manifest, unbuilt = kernels_lookup.ahead_manifest(), ''
+    except (kernels_lookup.NoBuildAhead, OSError) as exc:
         manifest, unbuilt = None, str(exc)
     if args.check or (not missing and manifest is not None):
         if missing:
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
             return EXIT_FAILURE
         table = manifest['kernels']
         print(f'planning kernels: {sum(len(v) for v in table.values())} signatures of '
-              f'{len(table)} kernels built ahead of time in {kernels.ahead_directory()}')
+              f'{len(table)} kernels built ahead of time in {kernels_lookup.ahead_directory()}')
         return EXIT_OK
 
     def progress(step: str) -> None:

@@ -4,7 +4,7 @@ The node's process at start-up: the compiled kernels loaded early, and saying wh
 The node is ready only once it can answer: its roadmap loaded and the compiled kernels too
 (``worker``). ``load_kernels`` starts loading the kernels in a thread of their own as the
 process starts, beside the imports, the node's set-up and the roadmap's load: the build
-``wafer-kernels`` made ahead of time for this machine (``kernels.load_ahead``, a few
+``wafer-kernels`` made ahead of time for this machine (``kernels_lookup.load_ahead``, a few
 milliseconds, numba not imported), else numba's cache (``kernels.load_cached``, about a
 second). ``kernels_ready`` waits for that and, only if some kernel is in neither (an
 upgrade of the package, another machine), compiles them (``service.warmup``), announced
@@ -22,7 +22,7 @@ import threading
 import time
 from typing import Callable, Optional
 
-from wafer_planner_ros import kernels
+from wafer_planner_ros import kernels, kernels_lookup
 
 ANNOUNCE_AFTER = 1.0
 """s after which kernels still being compiled are announced."""
@@ -88,7 +88,7 @@ class _KernelLoading:
         self.error: Optional[BaseException] = None
         self.ahead_error: Optional[BaseException] = None
         self.no_build = ''
-        """Why there is no build ahead of time to load (``kernels.NoBuildAhead``)."""
+        """Why there is no build ahead of time to load (``kernels_lookup.NoBuildAhead``)."""
 
     def start(self) -> None:
         with self._lock:
@@ -105,8 +105,8 @@ class _KernelLoading:
             self.error = exc
             return
         try:
-            self.ahead = kernels.load_ahead()
-        except kernels.NoBuildAhead as exc:
+            self.ahead = kernels_lookup.load_ahead()
+        except kernels_lookup.NoBuildAhead as exc:
             self.no_build = str(exc)
         except Exception as exc:  # noqa: B902 - a build that does not load: numba's cache
             self.ahead_error = exc
@@ -127,7 +127,7 @@ class _KernelLoading:
                 return
             if self.ahead_error is not None:
                 logger.warning(f'the planning kernels built ahead of time in '
-                               f'{kernels.ahead_root()} could not be loaded: '
+                               f'{kernels_lookup.ahead_root()} could not be loaded: '
                                f"{self.ahead_error}; using numba's cache")
             if self.ahead:
                 logger.info(f'planning kernels loaded in {self.seconds:.3f} s: {self.ahead} '

@@ -25,7 +25,7 @@ import threading
 import time
 from typing import Callable, Optional
 
-from wafer_planner_ros import kernels
+from wafer_planner_ros import kernels, kernels_lookup
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.node import markers, messages
@@ -196,7 +196,7 @@ class PlanningWorker:
                 'last_rebuild_error': loader.last_load_error,
                 **table_counts(serving),
                 'kernels_compiled': kernels.compiled_count(),
-                'kernels_ahead': kernels.ahead_count(),
+                'kernels_ahead': kernels_lookup.ahead_count(),
             }
 
     def request_stop(self) -> None:

@@ -8,7 +8,7 @@ a small roadmap, planning a station pair and a joint pair by each curve method, 
 proving (a curve and the same curve backwards, as the station table answers the way
 back) and naming contacts. ``wafer-kernels`` runs it once after an install (the
 README's set-up does) and builds the signatures numba then holds ahead of time (``kernels_ahead``);
-the node and the tools then only load the kernels (``kernels.load_ahead``, milliseconds, or
+the node and the tools then only load the kernels (``kernels_lookup.load_ahead``, milliseconds, or
 ``kernels.load_cached``, about a second), and ``node.startup.kernels_ready`` is what the
 node does at start-up: load them, and compile the missing ones only if some are missing
 (after an upgrade of the package, or on another machine).
