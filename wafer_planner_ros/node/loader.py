@@ -47,7 +47,7 @@ STARTED, QUEUED = 'started', 'queued'
 
 
 class Phase(enum.Enum):
-    """What the loading side of the worker is doing (one at a time; see ``Worker.status``)."""
+    """What the loading side of the worker is doing (one at a time; ``PlanningWorker.status``)."""
 
     IDLE = None
     """No load under way: the serving roadmap (if any) serves."""
