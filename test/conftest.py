@@ -7,7 +7,7 @@ import pytest
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.roadmap.cache import load_or_build
 
-CELL_DIR = Path(__file__).resolve().parent / 'cells'
+CELL_DIR = Path(__file__).resolve().parent / 'support' / 'cells'
 CELL_FILES = {'default': default_cell_path(), 'pillar': CELL_DIR / 'pillar.yaml',
               'notched': CELL_DIR / 'notched.yaml'}
 

@@ -10,7 +10,7 @@ from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.geometry.contacts import body_contacts, colliding, nearest_points
 from wafer_planner_ros.geometry.planar import cross2
 
-PILLAR = Path(__file__).resolve().parent / 'cells' / 'pillar.yaml'
+PILLAR = Path(__file__).resolve().parents[1] / 'support' / 'cells' / 'pillar.yaml'
 
 SAMPLES = 3000
 NEAR = 2e-4

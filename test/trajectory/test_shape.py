@@ -31,6 +31,8 @@ from wafer_planner_ros.trajectory.shape_problem import refine, ShapeProblem
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
+CELL_DIR = Path(__file__).resolve().parents[1] / 'support' / 'cells'
+
 
 @pytest.fixture(scope='module')
 def corridor(default_cell, default_roadmap):
@@ -324,7 +326,7 @@ def test_a_coarse_optimum_the_proof_refutes_starts_the_fine_stage(roadmap_cache,
     corridor curve, in about a third of its iterations (52 against 150).
     """
     monkeypatch.setattr(methods, 'coarse_samples', lambda per_span, *_: per_span)
-    cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'pillar.yaml')
+    cell = Cell.from_yaml(CELL_DIR / 'pillar.yaml')
     cached = load_or_build(cell, seed=0, cache_dir=roadmap_cache)
     planner = Planner(cell, cached.roadmap, PlannerSettings(method='whole-curve'))
     start, goal = ([c.q for c in cell.stations[name].configs if c.elbow == elbow][0]

@@ -12,11 +12,11 @@ import time
 
 import numpy as np
 import pytest
-from test_recording_process import read_with_rosbags
+from sessions import read_with_rosbags
 
 pytest.importorskip('rclpy')
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PARAMS = ROOT / 'config' / 'wafer_planner.yaml'
 CLIENT = [sys.executable, '-m', 'wafer_planner_ros.cli.client']
 DEFAULT_TIMEOUT = 2.0

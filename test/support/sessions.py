@@ -1,8 +1,15 @@
-"""A session of requests like a cell controller's: stations, joint requests and bad ones."""
+"""
+A session of requests like a cell controller's (stations, joint requests and bad ones).
 
+And a recorded session read back by the independent ``rosbags``.
+"""
+
+from collections import defaultdict
 import json
 
 import numpy as np
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import get_typestore, Stores
 from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -58,3 +65,13 @@ def _joints(request_id, start, goal, joint_names=()) -> JointTrajectory:
     msg.points = [JointTrajectoryPoint(positions=[float(v) for v in start]),
                   JointTrajectoryPoint(positions=[float(v) for v in goal])]
     return msg
+
+
+def read_with_rosbags(bag) -> dict:
+    """Return every message of the bag, deserialised by rosbags, by topic."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    messages = defaultdict(list)
+    with Reader(bag) as reader:
+        for connection, _, raw in reader.messages():
+            messages[connection.topic].append(store.deserialize_cdr(raw, connection.msgtype))
+    return messages

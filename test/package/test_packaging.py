@@ -6,7 +6,7 @@ import re
 import sys
 import xml.etree.ElementTree as ElementTree
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 # The module each package.xml key or requirements-ros.txt entry provides.
 PROVIDES = {
     'rclpy': ['rclpy'], 'std_msgs': ['std_msgs'], 'std_srvs': ['std_srvs'],
@@ -65,7 +65,7 @@ def test_every_imported_module_is_declared_for_a_ros_install():
     assert not unknown, f'say in PROVIDES which module these give: {sorted(unknown)}'
     by_run = {m for key in run | pip for m in PROVIDES[key]}
     by_test = by_run | {m for key in test for m in PROVIDES[key]}
-    local = {p.stem for p in (ROOT / 'test').glob('*.py')}
+    local = {p.stem for p in (ROOT / 'test').rglob('*.py')}
     assert sorted(_imported(ROOT / 'wafer_planner_ros') - by_run) == []
     assert sorted(_imported(ROOT / 'launch') - by_run) == []
     assert sorted(_imported(ROOT / 'test') - by_test - local - TEST_ONLY) == []

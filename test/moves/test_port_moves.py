@@ -18,6 +18,8 @@ from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 from wafer_planner_ros.trajectory.tuning import ShapeSettings
 import yaml
 
+CELL_DIR = Path(__file__).resolve().parents[1] / 'support' / 'cells'
+
 
 def _planner(cell, roadmap_cache, method=KnotTiming):
     cached = load_or_build(cell, cache_dir=roadmap_cache)
@@ -224,7 +226,7 @@ def test_a_move_round_a_notch_blends_into_both_ports(roadmap_cache, seed):
     tip of that port's wedge, nothing was proven, and the move stopped at both mouths on
     the corridor curve until the optimiser kept a disc round that mouth.
     """
-    cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'notched.yaml')
+    cell = Cell.from_yaml(CELL_DIR / 'notched.yaml')
     cached = load_or_build(cell, seed=seed, cache_dir=roadmap_cache)
     planner = Planner(cell, cached.roadmap, PlannerSettings(method=WholeCurve))
     start, goal = 'loadport1:inside', 'loadlock1:inside'
@@ -253,7 +255,7 @@ def test_a_transfer_round_a_pillar_is_proven_by_its_coarse_stage(roadmap_cache):
     collision, and the coarse stage proved nothing in six rounds; the fine stage then
     started from the corridor curve (13 s to plan, 3.718 s, where 3.652 s is found).
     """
-    cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'pillar.yaml')
+    cell = Cell.from_yaml(CELL_DIR / 'pillar.yaml')
     cached = load_or_build(cell, seed=1, cache_dir=roadmap_cache)
     planner = Planner(cell, cached.roadmap, PlannerSettings(method=WholeCurve))
     result = planner.plan('loadport1:inside', 'loadlock1:inside', load=EMPTY)
@@ -273,7 +275,7 @@ def test_joint_angles_at_a_mouth_are_not_inside_its_port(roadmap_cache):
     the mouth's inverse kinematics put it, 4e-16 rad from the angles asked, and every
     move to those angles failed verification.
     """
-    cell = Cell.from_yaml(Path(__file__).resolve().parent / 'cells' / 'pillar.yaml')
+    cell = Cell.from_yaml(CELL_DIR / 'pillar.yaml')
     cached = load_or_build(cell, seed=0, cache_dir=roadmap_cache)
     start, goal = ([c.q for c in cell.stations[name].configs if c.elbow == elbow][0]
                    for name, elbow in (('loadport1', 1), ('loadlock1', -1)))

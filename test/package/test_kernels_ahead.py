@@ -15,7 +15,7 @@ from wafer_planner_ros.node import startup
 from wafer_planner_ros.service import warmup  # noqa: F401 - every kernel, as the node has them
 from wafer_planner_ros.trajectory import bspline
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 _PLAN = """
 import json, sys, threading, time

@@ -5,7 +5,7 @@ The node is stopped cleanly (SIGINT, SIGTERM) or killed (SIGKILL, then ``wafer-r
 and its recording is replayed offline.
 """
 
-from collections import Counter, defaultdict
+from collections import Counter
 import os
 import signal
 import subprocess
@@ -17,8 +17,7 @@ from node_harness import isolate_dds, Peer, wait_for
 import pytest
 import rclpy
 from rosbags.rosbag2 import Reader
-from rosbags.typesys import get_typestore, Stores
-from sessions import mixed_requests
+from sessions import mixed_requests, read_with_rosbags
 
 REQUEST_TOPICS = ('/wafer_planner/plan_station_request', '/wafer_planner/plan_request')
 
@@ -60,16 +59,6 @@ def record_session(tmp_path, roadmap_cache, cell, stop: signal.Signals, *paramet
     bags = list(recordings.iterdir())
     assert len(bags) == 1, bags
     return bags[0], peer, output, node.returncode
-
-
-def read_with_rosbags(bag) -> dict:
-    """Return every message of the bag, deserialised by rosbags, by topic."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    messages = defaultdict(list)
-    with Reader(bag) as reader:
-        for connection, _, raw in reader.messages():
-            messages[connection.topic].append(store.deserialize_cdr(raw, connection.msgtype))
-    return messages
 
 
 def check_complete(bag, peer, count: int = 50, files: int = 1) -> None:

@@ -49,7 +49,7 @@ FRAMES = '/wafer_planner/frames'
 """Where the joint-space frame stands (foxglove.FrameTransform, kept as bytes here)."""
 MESSAGE_DATA = 0x01
 """The opcode of a binary message-data frame (server to client)."""
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 STOPPED_WITHIN = 2.0
 """s from SIGINT until the node's process has ended, whatever its clients do."""
 GROWTH_MB = 150.0

@@ -16,7 +16,7 @@ from wafer_planner_ros.node import startup
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @kernel(nogil=True)

@@ -24,7 +24,7 @@ from wafer_planner_ros.study.runner import run_variants
 from wafer_planner_ros.study.spec import Study, StudyError, Variant
 import yaml
 
-CELLS = Path(__file__).resolve().parent / 'cells'
+CELLS = Path(__file__).resolve().parents[1] / 'support' / 'cells'
 EXAMPLE = default_cell_path().parent / 'example_study.yaml'
 
 

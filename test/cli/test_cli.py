@@ -79,7 +79,8 @@ def test_the_roadmap_figure_names_joints_stations_and_branches_as_the_cell_does(
 
 def test_json_file_and_test_cell(tmp_path, capsys):
     out_file = tmp_path / 'stats.json'
-    cell = os.path.join(os.path.dirname(__file__), 'cells', 'notched.yaml')
+    cell = os.path.join(os.path.dirname(__file__), '..', 'support', 'cells',
+                        'notched.yaml')
     code, _, _ = _run(capsys, '--cell', cell, '--nodes', '300', '--no-cache', '--json',
                       str(out_file))
     assert code == 0

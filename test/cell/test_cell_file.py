@@ -11,7 +11,7 @@ from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.errors import CellError
 import yaml
 
-CELLS = [default_cell_path(), *sorted((default_cell_path().parents[1] / 'test' / 'cells')
+CELLS = [default_cell_path(), *sorted((default_cell_path().parents[1] / 'test/support/cells')
                                       .glob('*.yaml'))]
 PARSERS = [pytest.param(True, id='libyaml', marks=pytest.mark.skipif(
     not cell_file.HAVE_LIBYAML, reason='PyYAML without libyaml')),

@@ -115,7 +115,7 @@ def test_node_process_rejects_a_bad_parameter(dds_env):
 def _launch_module():
     import importlib.util
     from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / 'launch' / 'wafer_planner.launch.py'
+    path = Path(__file__).resolve().parents[2] / 'launch' / 'wafer_planner.launch.py'
     spec = importlib.util.spec_from_file_location('wafer_planner_launch', path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -4,7 +4,7 @@ from pathlib import Path
 
 from importlinter.cli import lint_imports
 
-SETUP_CFG = Path(__file__).resolve().parents[1] / 'setup.cfg'
+SETUP_CFG = Path(__file__).resolve().parents[2] / 'setup.cfg'
 
 
 def test_import_contracts_are_kept(capsys):
