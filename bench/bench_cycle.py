@@ -44,8 +44,9 @@ from wafer_planner_ros.trajectory.stopwatch import PARTS
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'cycle.json'
-CELLS = {'default': default_cell_path(), 'pillar': HERE.parent / 'test' / 'cells' / 'pillar.yaml',
-         'notched': HERE.parent / 'test' / 'cells' / 'notched.yaml'}
+TEST_CELLS = HERE.parent / 'test' / 'support' / 'cells'
+CELLS = {'default': default_cell_path(), 'pillar': TEST_CELLS / 'pillar.yaml',
+         'notched': TEST_CELLS / 'notched.yaml'}
 OURS = {'paper': PlannerSettings.paper(), 'corridor': PlannerSettings(method='knot-timing'),
         'ours': PlannerSettings(method='whole-curve'),
         'budget': PlannerSettings(method='whole-curve')}

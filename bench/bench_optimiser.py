@@ -28,8 +28,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / 'results' / 'optimiser.json'
 CELLS = {'default': ROOT / 'config' / 'efem_default.yaml',
-         'pillar': ROOT / 'test' / 'cells' / 'pillar.yaml',
-         'notched': ROOT / 'test' / 'cells' / 'notched.yaml'}
+         'pillar': ROOT / 'test' / 'support' / 'cells' / 'pillar.yaml',
+         'notched': ROOT / 'test' / 'support' / 'cells' / 'notched.yaml'}
 OLD = 'b871dd3'
 
 

@@ -1,7 +1,7 @@
 """
 The moves through the ports and the whole station table: how long they take to plan.
 
-For each test cell (the default one, ``test/cells/*``) and each roadmap seed (default 0, 1
+For each test cell (the default one, ``test/support/cells/*``) and each roadmap seed (default 0, 1
 and 2; from the roadmap cache), one whole-curve planner per limit set plans what the node's
 station table holds, group by group as ``node.serving.build_station_tables`` does after a
 first start (``build_table``): the station pairs loaded, then empty, then every
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
         count = next((i for i, a in enumerate(rest) if not a.isdigit()), len(rest))
         seeds, named = [int(a) for a in rest[:count]], named[:k] + rest[count:]
     cells = [Path(p) for p in named] or [default_cell_path()] + sorted(
-        (HERE.parent / 'test' / 'cells').glob('*.yaml'))
+        (HERE.parent / 'test' / 'support' / 'cells').glob('*.yaml'))
     reports = []
     for path in cells:
         cell = Cell.from_yaml(path)

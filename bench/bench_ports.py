@@ -1,7 +1,7 @@
 """
 Whole wafer moves, port to port: non-stop against stop-and-go and the limit, and the cycle.
 
-For each test cell (the default one, ``test/cells/*``) and each loadport/loadlock pair,
+For each test cell (the default one, ``test/support/cells/*``) and each loadport/loadlock pair,
 roadmap seed 0 (the node's default), planned by the whole-curve optimiser as a
 ``wafer-plan`` call does, unbudgeted, the single-blade swap cycle (``service.cycle``, as
 ``wafer-plan --cycle``):
@@ -143,7 +143,7 @@ def main(argv=None) -> int:
         if len(only) != 2 or len(named) != 1:
             raise SystemExit('usage: bench_ports.py CELL_FILE --pair LOADPORT LOADLOCK')
     cells = [Path(p) for p in named] or [default_cell_path()] + sorted(
-        (HERE.parent / 'test' / 'cells').glob('*.yaml'))
+        (HERE.parent / 'test' / 'support' / 'cells').glob('*.yaml'))
     for path in cells:
         cell = Cell.from_yaml(path)
         roadmap = load_or_build(cell).roadmap

@@ -49,7 +49,7 @@ from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'peer.json'
-TEST_CELLS = Path(__file__).resolve().parents[1] / 'test' / 'cells'
+TEST_CELLS = Path(__file__).resolve().parents[1] / 'test' / 'support' / 'cells'
 MILESTONES = 1500
 MOTION_STEP = 0.005
 """rad: the longest step of OMPL's motion checks (Euclidean in joint space)."""
