@@ -48,10 +48,11 @@ test: $(STAMP)
 		--event-handlers console_direct+ --pytest-args -p no:cacheprovider
 	$(COLCON) test-result --test-result-base .colcon/build --verbose
 
-# The inner loop while developing: the tests not marked slow, run on the sources in place
-# (the editable install) with the kernels compiled for them; no colcon, no linters' copy.
+# The inner loop while developing: the tests marked neither slow nor linter (the ament linters
+# and the import contracts are left to `make test`), run on the sources in place (the editable
+# install) with the kernels compiled for them; no colcon.
 test-fast: kernels
-	$(ENV) $(PY) -m pytest test -m "not slow" -p no:cacheprovider -q
+	$(ENV) $(PY) -m pytest test -m "not slow and not linter" -p no:cacheprovider -q
 
 bench: kernels
 	$(PY) -m pip install --disable-pip-version-check -q -r bench/requirements.txt

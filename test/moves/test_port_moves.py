@@ -168,6 +168,7 @@ def test_the_whole_curve_leaves_and_enters_the_ports_without_stopping(default_ce
     assert result.cycle_time < 0.8 * stopping.cycle_time
 
 
+@pytest.mark.slow
 def test_a_move_through_the_ports_takes_the_transfer_its_station_pair_finished(
         default_cell, roadmap_cache, monkeypatch):
     """The station pair's other elbow-branch combinations serve as transfers, verified."""

@@ -59,6 +59,7 @@ def test_station_requests_are_answered_from_the_table_the_node_planned(
         node.close()
 
 
+@pytest.mark.slow
 def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_path,
                                                             default_cell, default_roadmap):
     """Both directions of a pair edited in the cached table: planned, never sent as stored."""
@@ -101,6 +102,7 @@ def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_p
         node.close()
 
 
+@pytest.mark.slow
 def test_the_moves_through_the_ports_are_answered_from_the_tables_loaded_and_empty(
         roadmap_cache, tmp_path, default_cell, default_roadmap):
     """Both limit sets' tables cached whole: every pair, retracted and port to port, at once."""

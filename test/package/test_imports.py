@@ -3,10 +3,12 @@
 from pathlib import Path
 
 from importlinter.cli import lint_imports
+import pytest
 
 SETUP_CFG = Path(__file__).resolve().parents[2] / 'setup.cfg'
 
 
+@pytest.mark.linter
 def test_import_contracts_are_kept(capsys):
     # An upward import, rclpy or a message package imported by the core, or numba imported
     # anywhere but in kernels (which imports it when a kernel is first called) breaks one.
@@ -20,6 +22,7 @@ MAX_MODULE_LINES = 450
 """A module past this is holding more than one job: split it along a concept."""
 
 
+@pytest.mark.linter
 def test_no_module_is_longer_than_one_job_needs():
     package = SETUP_CFG.parent / 'wafer_planner_ros'
     long = {str(path.relative_to(package.parent)): lines

@@ -110,7 +110,8 @@ def test_the_papers_pipeline_stays_selectable(default_cell, default_roadmap):
     assert result.metrics['path_vertices'] == result.metrics['roadmap_path_vertices']
 
 
-@pytest.mark.parametrize('method', sorted(METHODS))
+@pytest.mark.parametrize('method', [  # the whole-curve optimisation takes seconds here
+    pytest.param(m, marks=pytest.mark.slow) if m == 'whole-curve' else m for m in sorted(METHODS)])
 def test_a_pair_whose_scaled_start_peaked_between_samples_is_answered_by_every_method(
         default_cell, default_roadmap, method):
     # The corridor curve of this pair is its λ-scaled start (no solver answer beats it),

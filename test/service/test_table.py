@@ -362,6 +362,7 @@ def through_ports(planner):
             for load in (LOADED, EMPTY)}
 
 
+@pytest.mark.slow
 def test_the_table_holds_the_moves_through_the_ports_loaded_and_empty(
         planner, through_ports, default_cell, roadmap_cache, tmp_path):
     """Inside one port to inside another, each limit set's own table, stored and loaded."""

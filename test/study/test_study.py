@@ -143,6 +143,7 @@ def test_the_example_study_reads():
     assert study.method == 'whole-curve'
 
 
+@pytest.mark.slow
 def test_a_variant_runs_the_motion_the_node_runs_by_default():
     # The default method is the node's: its moves through the ports do not stop at the
     # mouths, and the stop-and-go cycle they are compared with does, at both, each way.
@@ -224,6 +225,7 @@ def uninterrupted(tmp_path_factory):
     return folder, done
 
 
+@pytest.mark.slow
 def test_a_study_plans_every_variant_and_records_the_invalid_one(uninterrupted):
     folder, done = uninterrupted
     assert done.returncode == 0, done.stderr
@@ -246,6 +248,7 @@ def test_a_study_plans_every_variant_and_records_the_invalid_one(uninterrupted):
     assert '/6 variants' in done.stderr and 'left' in done.stderr  # progress with the time left
 
 
+@pytest.mark.slow
 def test_a_killed_study_resumes_with_only_the_missing_variants_and_the_same_file(
         uninterrupted, tmp_path):
     folder, done = uninterrupted
@@ -270,6 +273,7 @@ def test_a_killed_study_resumes_with_only_the_missing_variants_and_the_same_file
         [without_cost(r) for r in read_rows(folder / 'out')]
 
 
+@pytest.mark.slow
 def test_the_report_lists_the_best_variants_and_draws_three_figures(uninterrupted):
     folder, _ = uninterrupted
     report = study_cli('--report', folder / 'out', '--best', '3')
@@ -281,6 +285,7 @@ def test_the_report_lists_the_best_variants_and_draws_three_figures(uninterrupte
         assert (folder / 'out' / 'figures' / name).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_a_search_runs_its_trials_into_the_same_results(tmp_path):
     pytest.importorskip('optuna')
     study = small_study(tmp_path)
@@ -299,6 +304,7 @@ def test_a_search_runs_its_trials_into_the_same_results(tmp_path):
         [without_cost(r) for r in rows]
 
 
+@pytest.mark.slow
 def test_the_same_study_on_a_local_ray_cluster_gives_the_same_rows(uninterrupted, tmp_path):
     pytest.importorskip('ray')
     folder, _ = uninterrupted

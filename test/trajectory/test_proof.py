@@ -64,6 +64,7 @@ def test_a_curve_through_a_wall_is_refuted_where_it_collides(default_cell):
     assert a <= proof.collision <= b
 
 
+@pytest.mark.slow
 def test_the_proof_is_sound_and_decides_clear_cases(default_cell):
     """Random curves near free configurations: proven ones are free at every sample."""
     model, lipschitz = default_cell.clearance_model, default_cell.robot.lipschitz
