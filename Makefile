@@ -13,6 +13,10 @@ ENV := PATH="$(VENV)/bin:$$PATH"
 COLCON := $(ENV) colcon --log-base .colcon/log
 COLCON_PATHS := --paths $(CURDIR) --build-base .colcon/build --install-base .colcon/install
 RUN_ARGS ?=
+# The tests run in JOBS pytest-xdist workers, a test file per worker at a time (each worker
+# in a DDS domain of its own: test/conftest.py); JOBS=1 runs them in one process.
+JOBS ?= 2
+XDIST := $(if $(filter 1,$(JOBS)),-p no:xdist,-n $(JOBS) --dist loadfile)
 
 .PHONY: setup kernels run test test-fast bench clean
 
@@ -45,14 +49,14 @@ test: $(STAMP)
 	@PYTHONPATH="$$(echo $(CURDIR)/.colcon/install/wafer_planner_ros/lib/python3*/site-packages)" \
 		$(ENV) $(PY) -m wafer_planner_ros.cli.kernels
 	$(COLCON) test $(COLCON_PATHS) --return-code-on-test-failure \
-		--event-handlers console_direct+ --pytest-args -p no:cacheprovider
+		--event-handlers console_direct+ --pytest-args -p no:cacheprovider $(XDIST)
 	$(COLCON) test-result --test-result-base .colcon/build --verbose
 
 # The inner loop while developing: the tests marked neither slow nor linter (the ament linters
 # and the import contracts are left to `make test`), run on the sources in place (the editable
 # install) with the kernels compiled for them; no colcon.
 test-fast: kernels
-	$(ENV) $(PY) -m pytest test -m "not slow and not linter" -p no:cacheprovider -q
+	$(ENV) $(PY) -m pytest test -m "not slow and not linter" -p no:cacheprovider -q $(XDIST)
 
 bench: kernels
 	$(PY) -m pip install --disable-pip-version-check -q -r bench/requirements.txt

@@ -1,5 +1,6 @@
 """Fixtures shared by the tests: the cells and their roadmaps."""
 
+import os
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,21 @@ from wafer_planner_ros.roadmap.cache import load_or_build
 CELL_DIR = Path(__file__).resolve().parent / 'support' / 'cells'
 CELL_FILES = {'default': default_cell_path(), 'pillar': CELL_DIR / 'pillar.yaml',
               'notched': CELL_DIR / 'notched.yaml'}
+
+
+def pytest_configure(config):
+    """
+    Give each pytest-xdist worker a DDS domain of its own, for every node it starts.
+
+    Without workers, ``isolate_dds`` picks one domain (10..89) for the run; each worker takes
+    its own in that range, so that the nodes of two workers never meet. The second domains a
+    few files choose (130.., 200..) never meet either: a file runs on one worker (loadfile).
+    """
+    worker = os.environ.get('PYTEST_XDIST_WORKER')
+    if worker:
+        count = int(os.environ['PYTEST_XDIST_WORKER_COUNT'])
+        run = os.getppid() % (80 // count)  # the controller's process, shared by its workers
+        os.environ['ROS_DOMAIN_ID'] = str(10 + run * count + int(worker.removeprefix('gw')))
 
 
 @pytest.fixture(scope='session', params=sorted(CELL_FILES))
