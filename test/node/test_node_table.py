@@ -22,11 +22,8 @@ from wafer_planner_ros.service.table_store import save_table, table_path
 @pytest.mark.slow
 def test_station_requests_are_answered_from_the_table_the_node_planned(
         roadmap_cache, tmp_path, default_cell):
-    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
-    isolate_dds(tmp_path)
-    cache = tmp_path / 'cache'
-    # The roadmap cached, the table not yet.
-    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    from node_harness import Harness  # ROS only for the tests that use it
+    cache = _roadmaps_only(roadmap_cache, tmp_path)  # the roadmap cached, the table not yet
     assert not list(cache.glob('table-*.json'))
     node = Harness({'roadmap.cache_dir': str(cache), 'planning.station_table': True,
                     'planning.station_table_ports': False,
@@ -63,10 +60,8 @@ def test_station_requests_are_answered_from_the_table_the_node_planned(
 def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_path,
                                                             default_cell, default_roadmap):
     """Both directions of a pair edited in the cached table: planned, never sent as stored."""
-    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
-    isolate_dds(tmp_path)
-    cache = tmp_path / 'cache'
-    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    from node_harness import Harness  # ROS only for the tests that use it
+    cache = _roadmaps_only(roadmap_cache, tmp_path)
     # The node's table (whole-curve), its curves from the corridor method: any verified
     # curve will do, and these take milliseconds.
     whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
@@ -106,10 +101,8 @@ def test_a_tampered_entry_is_never_published_and_is_counted(roadmap_cache, tmp_p
 def test_the_moves_through_the_ports_are_answered_from_the_tables_loaded_and_empty(
         roadmap_cache, tmp_path, default_cell, default_roadmap):
     """Both limit sets' tables cached whole: every pair, retracted and port to port, at once."""
-    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
-    isolate_dds(tmp_path)
-    cache = tmp_path / 'cache'
-    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    from node_harness import Harness  # ROS only for the tests that use it
+    cache = _roadmaps_only(roadmap_cache, tmp_path)
     # The node's tables (whole-curve), their curves from the corridor method (milliseconds;
     # verified on load like any other).
     whole = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
@@ -191,11 +184,9 @@ def test_a_rebuild_while_the_table_is_planned_is_queued_and_the_table_finished_a
         roadmap_cache, tmp_path, default_cell, monkeypatch):
     """Never refused: the table's planning stops after its pair, the load runs again."""
     import threading
-    from node_harness import Harness, isolate_dds  # ROS only for the tests that use it
+    from node_harness import Harness  # ROS only for the tests that use it
     from wafer_planner_ros.node import loader, serving
-    isolate_dds(tmp_path)
-    cache = tmp_path / 'cache'
-    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    cache = _roadmaps_only(roadmap_cache, tmp_path)
     release, planned, loads = threading.Event(), [], []
     build_and_store_table, load_or_build = serving.build_and_store_table, loader.load_or_build
 
@@ -227,3 +218,12 @@ def test_a_rebuild_while_the_table_is_planned_is_queued_and_the_table_finished_a
     finally:
         release.set()
         node.close()
+
+
+def _roadmaps_only(roadmap_cache, tmp_path):
+    """Isolate DDS in ``tmp_path``; return a copy of the session's cache without its tables."""
+    from node_harness import isolate_dds  # ROS only for the tests that use it
+    isolate_dds(tmp_path)
+    cache = tmp_path / 'cache'
+    shutil.copytree(roadmap_cache, cache, ignore=shutil.ignore_patterns('table-*'))
+    return cache
