@@ -149,6 +149,25 @@ def result(planner, candidate: Candidate, checked: Verification, counts: dict,
                   shaped.warnings, timings_ms, extra=counts)
 
 
+def drafted(planner, candidate: Candidate, counts: dict) -> Optional[PlanResult]:
+    """
+    Return a kept draft verified as an answer, and keep it; None if it fails verification.
+
+    A draft is a slower combination an answer finished but did not verify (``legs``): a
+    move through a port verifies it when it first asks for that transfer.
+    """
+    begun = time.perf_counter()
+    stage_ms = stage_totals()
+    try:
+        checked = verified(planner, candidate, stage_ms)
+    except PlanningError as exc:
+        logger.debug('a kept combination is planned again: %s', exc)
+        return None
+    answered = result(planner, candidate, checked, counts, with_total(stage_ms, begun))
+    planner.keep(answered)
+    return answered
+
+
 def _prepare_all(planner, a: Endpoint, b: Endpoint, deadline, stage_ms) -> tuple:
     """Return every combination prepared, and the first reason one could not be."""
     prepared, failure = [], None

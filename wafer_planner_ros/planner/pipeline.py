@@ -23,7 +23,6 @@ from wafer_planner_ros.planner.endpoints import Endpoint, endpoint, only_branch
 from wafer_planner_ros.planner.legs import leg_key, Legs
 from wafer_planner_ros.planner.result import PlanResult
 from wafer_planner_ros.planner.settings import PlannerSettings
-from wafer_planner_ros.planner.stages import stage_totals, with_total
 from wafer_planner_ros.planner.through import through
 from wafer_planner_ros.trajectory.methods import CurveMethod
 
@@ -130,7 +129,7 @@ class Planner:
                       (start.configs[0][0], goal.configs[0][0]))
         leg, draft = self.legs.leg_or_draft(key)
         if draft is not None:
-            leg = self._drafted(*draft)
+            leg = candidates.drafted(self, *draft)
         if leg is None:
             leg = self._planned(start, goal, deadline, until, time.perf_counter())
         return leg
@@ -163,18 +162,3 @@ class Planner:
         if a.channels or b.channels:
             return through(self, a, b, deadline, until, begun, blend=True)
         return candidates.search(self, a, b, deadline, until, begun)
-
-    def _drafted(self, candidate: candidates.Candidate, counts: dict
-                 ) -> Optional[PlanResult]:
-        """Return a kept combination verified as an answer (and keep it), None if it fails."""
-        begun = time.perf_counter()
-        stage_ms = stage_totals()
-        try:
-            checked = candidates.verified(self, candidate, stage_ms)
-        except PlanningError as exc:
-            candidates.logger.debug('a kept combination is planned again: %s', exc)
-            return None
-        result = candidates.result(self, candidate, checked, counts,
-                                   with_total(stage_ms, begun))
-        self.keep(result)
-        return result

@@ -95,8 +95,7 @@ class JointBound:
 
     def ratios(self, states: States) -> Dict[str, float]:
         """Return the largest |q^(order)| / limit over the states (the verification's)."""
-        values = states.derivatives[self.order]
-        return {self.name: float(np.max(np.abs(values) / self.limit, initial=0.0))}
+        return {self.name: _largest(states.derivatives[self.order], self.limit)}
 
     def orders(self) -> Dict[str, int]:
         """Return each ratio's order in time."""
@@ -123,8 +122,7 @@ class WaferBound:
     def write_rows(self, padded, points, span, fraction, link_lengths, columns, values,
                    jacobian, row: int) -> int:
         """Write the rows at the (span, fraction) samples from ``row`` on; return the next."""
-        local = wafer_rows(padded, points, span, fraction, link_lengths,
-                           self.margin * self.limits, True)
+        local = self.sample_values(padded, points, span, fraction, link_lengths, True)
         scatter_rows(jacobian, values, row, *local, span, *columns)
         return row + self.parts * len(span)
 
