@@ -19,6 +19,12 @@ class ErrorCode(str, enum.Enum):
     BUSY = 'BUSY'
     VERIFICATION_FAILED = 'VERIFICATION_FAILED'
     INTERNAL = 'INTERNAL'
+    UNKNOWN_TRAJECTORY = 'UNKNOWN_TRAJECTORY'
+    """A stop of a trajectory the planner did not publish (or no longer keeps)."""
+    OUTSIDE_TRAJECTORY = 'OUTSIDE_TRAJECTORY'
+    """A stop at a moment before a trajectory's start or after its end."""
+    AT_REST = 'AT_REST'
+    """A stop at a moment the trajectory is at rest: there is nothing to stop."""
 
 
 class WaferPlannerError(Exception):

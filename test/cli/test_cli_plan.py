@@ -242,3 +242,28 @@ def test_a_tampered_table_entry_is_planned_instead_with_a_warning(
     assert any(np.array_equal(c.q, goal) for c in stations[pair[1]].configs)
     check(default_cell, plan, start, goal)
     assert 'loadport2 -> loadlock2' in err and 'rejected' in err and 'x its limit' in err, err
+
+
+def test_stop_at_stops_the_move_on_its_path_and_says_what_a_hold_would_demand(
+        roadmap_cache, capsys, default_cell):
+    code, out, _ = _run(capsys, 'loadport1', 'loadlock2', '--cache-dir', str(roadmap_cache),
+                        '--stop-at', '0.4', '--json', '-')
+    assert code == 0
+    move, stop = json.loads(out)
+    assert stop['status'] == 'ok' and stop['spline']['kind'] == 'retimed'
+    assert stop['spline']['base'] == move['spline']
+    assert stop['metrics']['stopped_at'] == 0.4 and stop['metrics']['timing'] == 'braked'
+    assert stop['cycle_time'] < move['cycle_time'] - 0.4
+    assert max(stop['metrics']['limit_ratios'].values()) <= 1.0
+    limit = default_cell.robot.limit_set.wafer.xy.max()
+    assert stop['metrics']['hold_wafer_acceleration'] > 2.0 * limit
+    # The stop starts where the move is at 0.4 s: its samples continue the move's.
+    at = next(p for p in move['points'] if abs(p['t'] - 0.4) < 1e-9)
+    assert np.allclose(stop['points'][0]['q'], at['q'], rtol=0, atol=1e-12)
+    assert np.allclose(stop['points'][0]['qd'], at['qd'], rtol=0, atol=1e-9)
+    code, out, _ = _run(capsys, 'loadport1', 'loadlock2', '--cache-dir', str(roadmap_cache),
+                        '--stop-at', '99')
+    assert code == 1 and 'OUTSIDE_TRAJECTORY' in out
+    code, _, err = _run(capsys, '--all-pairs', '--stop-at', '1', '--cache-dir',
+                        str(roadmap_cache))
+    assert code == 2 and '--stop-at' in err

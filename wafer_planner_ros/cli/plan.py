@@ -19,6 +19,7 @@ from wafer_planner_ros.service.planning import PlanningService
 from wafer_planner_ros.service.requests import end_of_text, with_negative_ends
 from wafer_planner_ros.service.table import load_or_build_table, load_table, TableError
 from wafer_planner_ros.trajectory.methods import KnotTiming, METHODS, WholeCurve
+from wafer_planner_ros.trajectory.stopping import hold_demand
 
 
 def parse_end(text: str):
@@ -50,6 +51,24 @@ def plan_one(planner, start, goal, info, joint_names, stations=None,
     except PlanningError as exc:
         return None, error_json(exc.code.value, exc.message, start, goal, info, load)
     return result, plan_json(result, info, joint_names)
+
+
+def stop_one(planner, result, at: float, info, joint_names) -> tuple:
+    """
+    Return (stop or None, JSON object): ``result``'s move stopped ``at`` s after its start.
+
+    The JSON adds what an abrupt hold there would demand of the wafer (``hold_demand``).
+    """
+    label = f'{result.start.label} -> {result.goal.label}'
+    try:
+        stopped = planner.stop(result.trajectory, at, label)
+    except PlanningError as exc:
+        return None, error_json(exc.code.value, exc.message, f'{label} at {at} s', 'rest',
+                                info, planner.load)
+    row = plan_json(stopped, info, joint_names)
+    row['metrics']['hold_wafer_acceleration'] = hold_demand(result.trajectory, at,
+                                                            planner.cell.robot)
+    return stopped, row
 
 
 def station_table(args, planner, quiet: bool):
@@ -126,6 +145,10 @@ def main(argv=None) -> int:
                         help='the limit set: loaded (a wafer on the blade, the wafer limit '
                         'holds; the default) or empty (joint limits only: an empty move '
                         'with a wafer on the blade can slide it)')
+    parser.add_argument('--stop-at', type=float, metavar='T',
+                        help='then stop the move T seconds after its start: the controlled '
+                        'stop on its own path, under every limit (the wafer limit and the '
+                        'jerk limit included), as the node answers ~/stop_request')
     parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
     parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
     args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
@@ -136,6 +159,8 @@ def main(argv=None) -> int:
         raise UsageError('give FROM and TO, --all-pairs or --cycle')
     if not several and args.goal is None:
         raise UsageError('give both FROM and TO')
+    if several and args.stop_at is not None:
+        raise UsageError('--stop-at stops one move: give FROM and TO')
     if args.cycle and args.load != LOADED:
         raise UsageError('--cycle plans its own loads (loaded out, empty back): no --load')
     try:
@@ -158,10 +183,15 @@ def main(argv=None) -> int:
                                args.load)
         results.append(result)
         rows.append(row)
+    if args.stop_at is not None and results[0] is not None:
+        result, row = stop_one(planner.for_load(args.load), results[0], args.stop_at, info,
+                               cell.robot.joint_names)
+        results.append(result)
+        rows.append(row)
     if args.json:
-        write_json(rows if args.all_pairs else rows[0], args.json)
+        write_json(rows if args.all_pairs or len(rows) > 1 else rows[0], args.json)
     if args.json != '-':
-        print(table(rows) if args.all_pairs else _summary(rows[0]))
+        print(table(rows) if args.all_pairs else '\n'.join(_summary(row) for row in rows))
     if args.plot:
         _plot(cell, results, rows, Path(args.plot))
     return EXIT_OK if all(r['status'] == 'ok' for r in rows) else EXIT_FAILURE
@@ -228,6 +258,14 @@ def _summary(row: dict) -> str:
     if row['status'] != 'ok':
         return f"{row['from']} -> {row['to']}: {row['code']}: {row['message']}"
     m = row['metrics']
+    if 'stopped_at' in m:
+        return (f"stop of {row['from']}: ok, at rest after {row['cycle_time']:.3f} s, wafer "
+                f"travel {m['wafer_path_length'] * 1000:.1f} mm on the move's path\n"
+                f"  {summary.ratios_text(m['limit_ratios'])}\n"
+                '  an abrupt hold there (each joint braked alone at its limit) would '
+                f"demand {m['hold_wafer_acceleration']:.2f} m/s^2 of the wafer\n"
+                f"  {summary.proof_text(m['certified'])}; stop "
+                + ', '.join(f'{k} {v:.1f}' for k, v in row['timings_ms'].items()) + ' ms')
     load = '' if row['load'] == LOADED else f", {row['load']}"
     return (f"{row['from']} -> {row['to']}{load}: ok, "
             f"{summary.cycle_text(row['cycle_time'], row['initial_cycle_time'])}, "

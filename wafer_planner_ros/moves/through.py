@@ -25,6 +25,7 @@ from wafer_planner_ros.moves.channel import Channel
 from wafer_planner_ros.moves.timing import Bounds, Profile, profile
 from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.retimed import along
 from wafer_planner_ros.trajectory.shape_problem import FreeEnd
 
 SPEEDS = 25
@@ -55,11 +56,7 @@ class Way:
     def states(self, t, orders: Sequence[int]) -> list:
         """Return q and its derivatives of ``orders`` at local times ``t`` (out of the port)."""
         sigma = self.profile.evaluate(t)
-        q, g1, g2, g3 = self.channel.derivatives(sigma[:, 0])
-        s1, s2, s3 = (sigma[:, k, None] for k in (1, 2, 3))
-        by_order = {0: lambda: q, 1: lambda: g1 * s1, 2: lambda: g2 * s1 ** 2 + g1 * s2,
-                    3: lambda: g3 * s1 ** 3 + 3.0 * g2 * s1 * s2 + g1 * s3}
-        return [by_order[k]() for k in orders]
+        return along(self.channel.derivatives(sigma[:, 0]), sigma, orders)
 
     def peak_speed(self, a, b) -> np.ndarray:
         """Return a bound of every |q'_j| on each [a_k, b_k] within one phase, (K, 3)."""
@@ -225,11 +222,9 @@ class PortMove(Trajectory):
                 if not gap <= JOIN_TOLERANCE:
                     return (f"the transfer and the {name}'s port meet with derivative "
                             f'{order} differing by {gap:.3g}')
-        q0, q1 = self.evaluate([0.0, self.duration], 0)
-        if not np.array_equal(q0, np.asarray(start, float)):
-            return f'it starts at {q0.tolist()}, not at the start {np.asarray(start).tolist()}'
-        if not np.array_equal(q1, np.asarray(goal, float)):
-            return f'it ends at {q1.tolist()}, not at the goal {np.asarray(goal).tolist()}'
+        problem = self.ends_problem(start, goal)
+        if problem is not None:
+            return problem
         if self.transfer is None:
             way = self.out or self.into
             if way.profile.end_speed != 0.0:

@@ -18,6 +18,8 @@ from typing import Optional
 import numpy as np
 import ruckig
 
+from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
+
 BISECTIONS = 32
 """Halvings of the reach search (``Bounds.reach``)."""
 BACKWARDS = 1e-12
@@ -76,111 +78,30 @@ class Bounds:
 
 
 @dataclass(frozen=True, eq=False)
-class Profile:
+class Profile(JerkProfile):
     """sigma(t) from rest at 0 to (``length``, speed, acceleration): seven phases."""
-
-    starts: np.ndarray
-    """(8,) the phases' start times, then the end time (s)."""
-    jerks: np.ndarray
-    """(7,) each phase's jerk (m/s^3)."""
-    states: np.ndarray
-    """(8, 3) sigma, its speed and acceleration at each start, then at the end."""
-
-    @property
-    def duration(self) -> float:
-        """Return the profile's time (s)."""
-        return float(self.starts[-1])
 
     @property
     def length(self) -> float:
         """Return the distance covered (m)."""
         return float(self.states[-1, 0])
 
-    @property
-    def end_speed(self) -> float:
-        """Return the speed at the end (m/s)."""
-        return float(self.states[-1, 1])
-
-    @property
-    def end_acceleration(self) -> float:
-        """Return the acceleration at the end (m/s^2)."""
-        return float(self.states[-1, 2])
-
-    def evaluate(self, t) -> np.ndarray:
-        """Return (K, 4): sigma and its first three derivatives at times ``t`` (clipped)."""
-        t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
-        k = np.clip(np.searchsorted(self.starts, t, side='right') - 1, 0, len(self.jerks) - 1)
-        tau = t - self.starts[k]
-        (p, v, a), j = self.states[k].T, self.jerks[k]
-        out = np.stack([p + tau * (v + tau * (a / 2.0 + tau * j / 6.0)),
-                        v + tau * (a + tau * j / 2.0), a + tau * j, j], axis=1)
-        at_end = t >= self.duration
-        out[at_end, :3] = self.states[-1]
-        return out
-
-    def peak_speed(self, a, b) -> np.ndarray:
-        """Return the exact largest |sigma'| on each [a_k, b_k] within one phase, (K,)."""
-        a, b = np.atleast_1d(np.asarray(a, float)), np.atleast_1d(np.asarray(b, float))
-        k = np.clip(np.searchsorted(self.starts, 0.5 * (a + b), side='right') - 1, 0,
-                    len(self.jerks) - 1)
-        (_, v, acc), j = self.states[k].T, self.jerks[k]
-
-        def speed(tau):
-            return np.abs(v + tau * (acc + tau * j / 2.0))
-
-        low, high = a - self.starts[k], b - self.starts[k]
-        peaks = np.maximum(speed(low), speed(high))
-        with np.errstate(divide='ignore', invalid='ignore'):
-            turn = np.where(j != 0.0, -acc / j, -np.inf)
-        inside = (turn > low) & (turn < high)
-        return np.where(inside, np.maximum(peaks, speed(np.where(inside, turn, low))), peaks)
-
-    def slowest(self) -> float:
-        """Return the least sigma' over the profile (exact: each phase's ends and turn)."""
-        tau = np.diff(self.starts)
-        (_, v, a), j = self.states[:-1].T, self.jerks
-        with np.errstate(divide='ignore', invalid='ignore'):
-            turn = np.where(j != 0.0, -a / j, -1.0)
-        turn = np.where((turn > 0.0) & (turn < tau), turn, 0.0)
-        at_turn = v + turn * (a + turn * j / 2.0)
-        return float(min(self.states[:, 1].min(), at_turn.min()))
-
-    def describe(self) -> dict:
-        """Return the profile as plain data."""
-        return {'starts': self.starts.tolist(), 'jerks': self.jerks.tolist(),
-                'states': self.states.tolist()}
-
     @classmethod
     def described(cls, data) -> 'Profile':
         """Return the profile ``describe`` gave (raise ValueError if it is not one)."""
-        try:
-            made = cls(*(np.asarray(data[k], float) for k in ('starts', 'jerks', 'states')))
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f'not a profile: {exc}') from None
-        if made.starts.shape != (8,) or made.jerks.shape != (7,) or \
-                made.states.shape != (8, 3):
+        made = super().described(data)
+        if made.starts.shape != (8,):
             raise ValueError(f'a profile with shapes {made.starts.shape}, '
                              f'{made.jerks.shape}, {made.states.shape}')
         return made
 
     def ill_formed(self) -> Optional[str]:
         """Return what makes the data no profile from rest that never moves back, or None."""
-        if not (np.isfinite(self.starts).all() and np.isfinite(self.jerks).all()
-                and np.isfinite(self.states).all()):
-            return 'its data are not finite'
-        if self.starts[0] != 0.0 or np.any(np.diff(self.starts) < 0.0):
-            return f'its phase times {self.starts.tolist()} do not ascend from 0'
+        problem = self.structure_problem()
+        if problem is not None:
+            return problem
         if np.any(self.states[0] != 0.0):
             return f'it starts at {self.states[0].tolist()}, not at rest at 0'
-        # Each phase must end where the next starts (its cubic integrated).
-        tau = np.diff(self.starts)
-        p, v, a = self.states[:-1].T
-        j = self.jerks
-        integrated = np.stack([p + tau * (v + tau * (a / 2.0 + tau * j / 6.0)),
-                               v + tau * (a + tau * j / 2.0), a + tau * j], axis=1)
-        gap = np.abs(integrated - self.states[1:]).max()
-        if not gap <= 1e-9:
-            return f'its phases do not join (by {gap:.3g})'
         if not self.slowest() >= -BACKWARDS:
             return f'it moves back (at {self.slowest():.3g} m/s)'
         return None

@@ -23,6 +23,7 @@ from wafer_planner_ros.planner.endpoints import Endpoint, endpoint, only_branch
 from wafer_planner_ros.planner.legs import leg_key, Legs
 from wafer_planner_ros.planner.result import PlanResult
 from wafer_planner_ros.planner.settings import PlannerSettings
+from wafer_planner_ros.planner.stop import stop
 from wafer_planner_ros.planner.through import through
 from wafer_planner_ros.trajectory.methods import CurveMethod
 
@@ -115,6 +116,19 @@ class Planner:
                                 f'{a.label} -> {b.label} does not stop on its way: neither '
                                 'end is inside a port')
         return through(self, a, b, deadline, None, begun, blend=False)
+
+    def stop(self, trajectory, at: float, label: str = 'the move',
+             load: Optional[str] = None) -> PlanResult:
+        """
+        Return the controlled stop of ``trajectory`` from ``at`` s on its path (``stop``).
+
+        ``load``: the limit set it keeps (None: this planner's); a stop keeps the set the
+        move was planned against. Raises PlanningError: OUTSIDE_TRAJECTORY, AT_REST or
+        VERIFICATION_FAILED.
+        """
+        if load is not None and load != self.load:
+            return self.for_load(load).stop(trajectory, at, label)
+        return stop(self, trajectory, at, label)
 
     def transfer(self, start: Endpoint, goal: Endpoint, deadline: Optional[float],
                  until: Optional[float] = None) -> PlanResult:

@@ -6,7 +6,7 @@ packaged default cell, so that numba compiles each one for this machine and keep
 cache (``kernels.cache_root``): reading a cell with its polygons checked compiled, building
 a small roadmap, planning a station pair and a joint pair by each curve method, verifying,
 proving (a curve and the same curve backwards, as the station table answers the way
-back) and naming contacts. ``wafer-kernels`` runs it once after an install (the
+back), stopping a move and naming contacts. ``wafer-kernels`` runs it once after an install (the
 README's set-up does) and builds the signatures numba then holds ahead of time (``kernels_ahead``);
 the node and the tools then only load the kernels (``kernels_lookup.load_ahead``, milliseconds, or
 ``kernels.load_cached``, about a second), and ``node.startup.kernels_ready`` is what the
@@ -73,6 +73,11 @@ def compile_kernels(progress: Optional[Callable[[str], None]] = None) -> dict:
             body_contacts(cell.clearance_model, result.positions[len(result.positions) // 2])
             # The way back, as the station table answers it.
             verify(result.trajectory.backwards(), cell, result.goal_q, result.start_q)
+            # A controlled stop of it, as the node answers a stop request.
+            try:
+                planner.stop(result.trajectory, 0.3 * result.cycle_time)
+            except PlanningError:
+                pass  # a workload stop that fails has still run its kernels
     say('contacts')
     body_contacts(cell.clearance_model, np.asarray(JOINT_PAIR[0]))
     return {'kernels': len(kernels.registered()),

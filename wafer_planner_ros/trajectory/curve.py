@@ -20,7 +20,12 @@ UNNAMED_KIND = 'cubic-b-spline'
 
 
 class Trajectory(ABC):
-    """A curve q(t) in joint space for t in [0, duration], starting and ending at rest."""
+    """
+    A curve q(t) in joint space for t in [0, duration], ending at rest.
+
+    Every kind starts at rest too, but for a curve that continues a motion (a controlled
+    stop, ``retimed.Retimed``): it starts in the state of the curve it continues.
+    """
 
     kind: ClassVar[str] = ''
     """The name its descriptions give (``describe``); empty for an abstract kind."""
@@ -74,6 +79,15 @@ class Trajectory(ABC):
         consistent, spanning [0, T]) and its ends, exactly at ``start`` and ``goal`` with
         zero velocity there.
         """
+
+    def ends_problem(self, start: np.ndarray, goal: np.ndarray) -> Optional[str]:
+        """Return how the curve misses ``start`` at 0 or ``goal`` at T exactly, or None."""
+        q0, q1 = self.evaluate([0.0, self.duration], 0)
+        if not np.array_equal(q0, np.asarray(start, float)):
+            return f'it starts at {q0.tolist()}, not at the start {np.asarray(start).tolist()}'
+        if not np.array_equal(q1, np.asarray(goal, float)):
+            return f'it ends at {q1.tolist()}, not at the goal {np.asarray(goal).tolist()}'
+        return None
 
     @abstractmethod
     def breaks(self) -> np.ndarray:

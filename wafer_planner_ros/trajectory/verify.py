@@ -12,7 +12,8 @@ from a port's axis and the blade's angle from its heading while the wafer is ins
 ``COLLISION_STEP`` rad apart in any joint, from 0 to T: on each eighth of a piece
 (``Trajectory.pieces``) the time step between collision checks is ``COLLISION_STEP`` over
 the exact peak joint speed there. Also checked: the start and goal are hit exactly, and
-velocity and acceleration are zero at both ends. Every figure that is NaN is a problem:
+velocity and acceleration are zero at both ends (at the start, for a curve that continues a
+motion, those of that motion). Every figure that is NaN is a problem:
 a comparison with NaN never passes.
 """
 
@@ -61,8 +62,14 @@ class Verification:
         return not self.problems
 
 
-def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) -> Verification:
-    """Check a trajectory of ``cell``'s robot from start to goal."""
+def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray,
+           moving: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Verification:
+    """
+    Check a trajectory of ``cell``'s robot from start to goal.
+
+    ``moving``: the velocity and acceleration it must start with, for a curve that
+    continues a motion (a controlled stop); None: it starts at rest.
+    """
     problem = trajectory.ill_formed(start, goal)
     if problem is not None:
         return Verification(problems=(f'ill-formed curve: {problem}',))
@@ -82,9 +89,14 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray) ->
     problems += [f'joint {robot.joint_names[j]} leaves its position limits' for j in outside]
     if not np.array_equal(q[0], start) or not np.array_equal(q[-1], goal):
         problems.append('the trajectory does not start and end exactly at start and goal')
-    ends = np.abs(np.concatenate([qd[[0, -1]], qdd[[0, -1]]])).max()
-    if ends > END_TOLERANCE:
-        problems.append(f'velocity or acceleration at an end is {ends:.3g}, not zero')
+    ends = np.abs(np.concatenate([qd[[-1]], qdd[[-1]]])).max()
+    if not ends <= END_TOLERANCE:
+        problems.append(f'velocity or acceleration at the end is {ends:.3g}, not zero')
+    begins = np.zeros((2, len(start))) if moving is None else np.asarray(moving, float)
+    gap = np.abs(np.stack([qd[0], qdd[0]]) - begins).max()
+    if not gap <= END_TOLERANCE:
+        problems.append(f'velocity or acceleration at the start is {gap:.3g} from '
+                        + ('zero' if moving is None else 'the motion it continues'))
     port_ratios, breach = port_deviation(cell.port_model, q)
     problems += [f'the wafer inside a port reaches {ratio:.4f} x its {name} tolerance'
                  f'{breach}' for name, ratio in port_ratios.items() if not ratio <= 1.0]
@@ -162,19 +174,20 @@ def collision_times(trajectory: Trajectory) -> np.ndarray:
     return np.append(t, trajectory.duration)
 
 
-def limit_times(duration: float) -> np.ndarray:
-    """Return the times of the limit check: 0 to ``duration``, at most LIMIT_STEP apart."""
-    return np.linspace(0.0, duration, int(np.ceil(duration / LIMIT_STEP)) + 1)
+def limit_times(duration: float, step: float = LIMIT_STEP) -> np.ndarray:
+    """Return the times of the limit check: 0 to ``duration``, at most ``step`` apart."""
+    return np.linspace(0.0, duration, int(np.ceil(duration / step)) + 1)
 
 
-def limit_states(trajectory: Trajectory, robot) -> States:
+def limit_states(trajectory: Trajectory, robot, step: float = LIMIT_STEP) -> States:
     """Return the curve's states (with the wafer acceleration) at the ``limit_times``."""
-    t = limit_times(trajectory.duration)
+    t = limit_times(trajectory.duration, step)
     q, qd, qdd, qddd = trajectory.evaluate_orders(t, range(4))
     return States(t, q, qd, qdd, qddd, robot.arm.wafer_acceleration(q, qd, qdd))
 
 
-def limit_ratios(trajectory: Trajectory, robot, constraints=None) -> dict:
+def limit_ratios(trajectory: Trajectory, robot, constraints=None,
+                 step: float = LIMIT_STEP) -> dict:
     """
     Return the largest |value| / limit of each limit, exactly as ``verify`` finds them.
 
@@ -184,4 +197,4 @@ def limit_ratios(trajectory: Trajectory, robot, constraints=None) -> dict:
     """
     if constraints is None:
         constraints = limit_constraints(robot.limit_set)
-    return state_ratios(constraints, limit_states(trajectory, robot))
+    return state_ratios(constraints, limit_states(trajectory, robot, step))

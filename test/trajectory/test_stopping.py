@@ -1,0 +1,129 @@
+"""
+A controlled stop: from any moment of a move to rest on its own path, within every limit.
+
+The checks here share nothing with the stop's own: the stop's states are compared with the
+move's at the times its timing maps to, its wafer acceleration is taken from second
+differences of wafer-centre positions and its jerk from differences of its acceleration.
+"""
+
+import numpy as np
+import pytest
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.methods import WholeCurve
+from wafer_planner_ros.trajectory.stopping import hold_demand
+from wafer_planner_ros.trajectory.verify import verify
+
+STEP = 1e-4
+"""s between the independent checks."""
+MOMENTS = 10
+
+
+@pytest.fixture(scope='module')
+def planner(default_cell, default_roadmap):
+    return Planner(default_cell, default_roadmap, PlannerSettings(method=WholeCurve))
+
+
+@pytest.fixture(scope='module')
+def moves(planner):
+    return {name: planner.plan(*ends) for name, ends in (
+        ('station', ('loadport1', 'loadlock2')),
+        ('port', ('loadport1:inside', 'loadlock2:inside')))}
+
+
+def _independent(cell, stop, move) -> dict:
+    """Return the stop's limit ratios measured without its own code; assert its path."""
+    robot = cell.robot
+    limits = robot.limit_set
+    t = np.linspace(0.0, stop.duration, int(np.ceil(stop.duration / STEP)) + 1)
+    q, qd, qdd = stop.evaluate_orders(t, range(3))
+    # On the move's path: every configuration is one the move passes through.
+    sigma = stop.timing.evaluate(t)[:, 0]
+    assert np.array_equal(q, move.evaluate(sigma))
+    assert np.all(np.diff(sigma) >= 0.0)
+    ratios = {'velocity': np.abs(qd) / limits.joints.velocity,
+              'acceleration': np.abs(qdd) / limits.joints.acceleration,
+              'jerk': np.abs(np.diff(qdd, axis=0) / STEP) / limits.joints.jerk}
+    centre = robot.arm.wafer_center(q)
+    ratios['wafer'] = np.abs(np.diff(centre, 2, axis=0) / STEP ** 2) / limits.wafer.xy
+    return {name: float(values.max()) for name, values in ratios.items()}
+
+
+@pytest.mark.parametrize('name', ['station', 'port'])
+def test_a_stop_at_ten_moments_keeps_every_limit_and_ends_at_rest_on_the_path(
+        planner, moves, name):
+    move = moves[name].trajectory
+    cell = planner.cell
+    early = 0
+    for at in np.linspace(0.0, move.duration, MOMENTS + 2)[1:-1]:
+        stop = planner.stop(move, at, 'r1')
+        curve = stop.trajectory
+        q, qd, qdd = (x[0] for x in move.evaluate_orders([at], range(3)))
+        s_q, s_qd, s_qdd = (x[0] for x in curve.evaluate_orders([0.0], range(3)))
+        # It starts exactly in the move's state there.
+        assert np.array_equal(s_q, q)
+        assert np.abs(s_qd - qd).max() <= 1e-9 and np.abs(s_qdd - qdd).max() <= 1e-9
+        end = curve.evaluate_orders([curve.duration], range(3))
+        assert np.abs(np.concatenate([end[1][0], end[2][0]])).max() == 0.0
+        assert stop.verification.ok and stop.verification.proof.certified
+        for limit, ratio in _independent(cell, curve, move).items():
+            assert ratio <= 1.0 + 1e-6, f'{limit} at {ratio} x its limit, stop at {at}'
+        # The answer's samples: the stop's, from its first state.
+        assert np.array_equal(stop.positions[0], q)
+        # Never later at rest than the move itself; early in a station move, far from
+        # braking to its goal, braked on the path and sooner. (Through a port, some
+        # moments still stop by the rest of the move: safe, not yet sooner.)
+        assert curve.duration <= move.duration - at
+        if at < 0.3 * move.duration and name == 'station':
+            early += 1
+            assert stop.metrics['timing'] == 'braked', f'the stop at {at}'
+            assert curve.duration < move.duration - at - 0.1, f'the stop at {at}'
+    assert early >= 2 or name != 'station'
+
+
+def test_an_abrupt_hold_demands_more_of_the_wafer_than_the_stop(planner, moves):
+    move = moves['station'].trajectory
+    at = 0.5 * move.duration
+    stop = planner.stop(move, at, 'r1')
+    limit = planner.cell.robot.limit_set.wafer.xy.max()
+    assert stop.verification.ratios['wafer_x'] <= 1.0
+    assert hold_demand(move, at, planner.cell.robot) > 2.0 * limit
+
+
+def test_a_stop_of_a_stop_works_and_is_described_again(planner, moves):
+    move = moves['station'].trajectory
+    first = planner.stop(move, 0.2 * move.duration, 'r1').trajectory
+    at = 0.3 * first.duration
+    second = planner.stop(first, at, 's1')
+    assert second.verification.ok
+    state = [x[0] for x in first.evaluate_orders([at], range(3))]
+    assert np.array_equal(second.positions[0], state[0])
+    assert np.abs(second.velocities[0] - state[1]).max() <= 1e-9
+    assert second.cycle_time <= first.duration - at
+    again = Trajectory.from_description(second.trajectory.describe())
+    t = np.linspace(0.0, second.cycle_time, 101)
+    assert np.array_equal(again.evaluate(t), second.trajectory.evaluate(t))
+
+
+@pytest.mark.parametrize('at, code', [(-0.1, ErrorCode.OUTSIDE_TRAJECTORY),
+                                      (float('nan'), ErrorCode.OUTSIDE_TRAJECTORY),
+                                      ('1.0', ErrorCode.OUTSIDE_TRAJECTORY),
+                                      (99.0, ErrorCode.OUTSIDE_TRAJECTORY),
+                                      (0.0, ErrorCode.AT_REST), ('end', ErrorCode.AT_REST)])
+def test_a_stop_outside_the_move_or_where_it_rests_is_refused_by_name(
+        planner, moves, at, code):
+    move = moves['station'].trajectory
+    with pytest.raises(PlanningError) as raised:
+        planner.stop(move, move.duration if at == 'end' else at, 'r1')
+    assert raised.value.code is code
+
+
+def test_a_stop_verified_as_starting_at_rest_or_in_another_motion_fails(planner, moves):
+    move = moves['station'].trajectory
+    stop = planner.stop(move, 0.5 * move.duration, 'r1')
+    curve, q, end = stop.trajectory, stop.start_q, stop.goal_q
+    assert not verify(curve, planner.cell, q, end).ok  # it does not start at rest
+    qd, qdd = (x[0] for x in move.evaluate_orders([0.5 * move.duration], (1, 2)))
+    assert not verify(curve, planner.cell, q, end, moving=(qd * 1.001, qdd)).ok
+    assert verify(curve, planner.cell, q, end, moving=(qd, qdd)).ok
