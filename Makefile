@@ -72,6 +72,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_ports.py
 	$(ENV) $(PY) bench/bench_port_table.py
 	$(ENV) $(PY) bench/bench_study.py
+	$(ENV) $(PY) bench/bench_stop.py
 
 clean:
 	rm -rf .colcon
