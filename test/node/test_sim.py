@@ -306,3 +306,30 @@ def test_the_sim_follows_a_planned_trajectory_and_survives_malformed_ones(sim, p
     assert np.max(np.abs(q[-1] - planned.positions[0])) > 0.05  # it has moved
     ratios = [m.data[3] for m in watcher.wafer[-50:]]
     assert 0.0 < max(ratios) <= 1.0 + 1e-3
+
+
+def test_wafer_sim_as_a_process_refuses_a_bad_parameter_and_stops_on_sigterm(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_DOMAIN_ID=str(200 + os.getpid() % 50), ROS_LOG_DIR=str(tmp_path / 'log'),
+               PYTHONUNBUFFERED='1')
+    command = [sys.executable, '-m', 'wafer_planner_ros.node.sim', '--ros-args']
+    bad = subprocess.run(command + ['-p', 'initial_station:=nowhere'], env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2
+    assert "no station 'nowhere'" in bad.stdout
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    try:
+        for line in process.stdout:  # until it says it runs (or ends)
+            if 'simulated arm on' in line:
+                break
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=10) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()

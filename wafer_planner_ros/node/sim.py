@@ -135,8 +135,8 @@ class SimulatedArm(Node):
                 [p.positions for p in points], [p.velocities for p in points],
                 [p.accelerations for p in points])
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            jump = self.follower.replace(None if stamp == 0 else self._seconds(stamp),
-                                         samples, now)
+            start = None if stamp == 0 else self._seconds(stamp)
+            jump = self.follower.replace(start, samples, now)
         except TrajectoryRefused as exc:
             self.refused += 1
             self.log.error(f'{label} refused, as a joint_trajectory_controller would: {exc}')
@@ -145,8 +145,11 @@ class SimulatedArm(Node):
         self.log.info(f'following {label}: {len(samples.times)} points, '
                       f'{samples.duration:.3f} s')
         if jump > JUMP:
+            late = '' if start is None or start >= now else (
+                f'; its start (header.stamp) was {1e3 * (now - start):.1f} ms before it '
+                'arrived, and the points already past are skipped')
             self.log.warning(f'{label} does not start where the arm is: a joint jumps by '
-                             f'{jump:.4g} rad (a real controller would lurch)')
+                             f'{jump:.4g} rad (a real controller would lurch){late}')
 
     # ----------------------------------------------------------------- state out
 
