@@ -212,8 +212,8 @@ def main(args=None) -> int:
     rclpy.init(args=args)
     node, executor, code = None, None, 0
     try:
-        node = SimulatedArm()
         executor = SingleThreadedExecutor()
+        node = SimulatedArm()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -221,6 +221,9 @@ def main(args=None) -> int:
     except (ValueError, ParameterException) as exc:
         print(f'wafer_sim: bad parameter: {exc}', flush=True)
         code = 2
+    except Exception:  # noqa: B902 - a signal before spinning shuts the context down
+        if rclpy.ok():
+            raise
     finally:
         if executor is not None:
             executor.shutdown()
