@@ -13,6 +13,8 @@ ENV := PATH="$(VENV)/bin:$$PATH"
 COLCON := $(ENV) colcon --log-base .colcon/log
 COLCON_PATHS := --paths $(CURDIR) --build-base .colcon/build --install-base .colcon/install
 RUN_ARGS ?=
+# 1: make run starts the simulated arm (wafer-sim) beside the node; 0: the node alone.
+SIM ?= 1
 # The tests run in JOBS pytest-xdist workers, a test file per worker at a time (each worker
 # in a DDS domain of its own: test/conftest.py); JOBS=1 runs them in one process.
 JOBS ?= 2
@@ -36,7 +38,15 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml
 kernels: $(STAMP)
 	@$(ENV) $(PY) -m wafer_planner_ros.cli.kernels
 
+# make run starts the simulated arm (wafer-sim: it executes the node's trajectories and
+# publishes /joint_states) beside the node, with the same parameters; SIM=0 leaves it out.
+# The sim ends with the node (Ctrl-C reaches the node; the sim is sent SIGTERM).
 run: kernels
+	@sim=; trap '[ -z "$$sim" ] || kill $$sim 2>/dev/null' EXIT; trap 'exit 130' INT TERM; \
+	if [ "$(SIM)" != 0 ]; then \
+		$(ENV) $(PY) -m wafer_planner_ros.node.sim --ros-args \
+			--params-file config/wafer_planner.yaml $(RUN_ARGS) & sim=$$!; \
+	fi; \
 	$(ENV) $(PY) -m wafer_planner_ros.node.main --ros-args \
 		--params-file config/wafer_planner.yaml $(RUN_ARGS)
 

@@ -35,6 +35,7 @@ setup(
             'wafer-replay = wafer_planner_ros.cli.replay:entry_point',
             'wafer-review = wafer_planner_ros.cli.review:entry_point',
             'wafer-study = wafer_planner_ros.cli.study:entry_point',
+            'wafer-sim = wafer_planner_ros.node.sim:entry_point',
             'wafer_planner_node = wafer_planner_ros.node.main:entry_point',
         ],
     },

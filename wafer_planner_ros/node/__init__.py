@@ -8,6 +8,6 @@ station table, ``loader``, then ``serving`` (a loaded roadmap taking over); what
 published, ``messages`` and ``markers``; what is recorded, ``recording``; the Foxglove live
 view, ``live`` (the node's side) over ``live_server`` (the WebSocket protocol); the
 process and its start-up, ``main`` and ``startup``; failing safely, ``faults``; talking to a
-running node, ``client`` and ``replay_publish``. How a request is planned is not decided
-here but in ``service.planning``.
+running node, ``client`` and ``replay_publish``; the simulated arm ``wafer-sim``, ``sim``. How
+a request is planned is not decided here but in ``service.planning``.
 """

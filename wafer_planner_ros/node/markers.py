@@ -1,5 +1,5 @@
 """
-RViz/Foxglove markers of the cell, the roadmap and the latest plan, as CDR bytes.
+RViz/Foxglove markers of the cell, the roadmap, the latest plan and the arm, as CDR bytes.
 
 Two frames. The cell (enclosure, obstacles, the robot at every station configuration with
 its wafer and labels, the wafer trace and robot outlines of a plan) is drawn in
@@ -47,6 +47,8 @@ COLOURS = {
     'ports': (0.85, 0.05, 0.05, 1.0),             # red: each port's axis, mouth to pick/place
     'path_joint_space': (1.00, 0.85, 0.10, 1.0),  # yellow
     'robot': (0.00, 0.85, 0.85, 0.7),            # cyan: the outlines along a plan
+    'arm': (0.10, 0.80, 0.55, 1.0),              # green: the simulated arm (node.sim)
+    'arm_wafer': (0.55, 0.85, 1.00, 0.9),        # pale blue: its wafer
 }
 """The colour (r, g, b, a) of each namespace."""
 WAFER_TRACE_COLOURS = ((1.00, 0.15, 0.60, 1.0), (0.55, 0.15, 1.00, 1.0))
@@ -78,6 +80,24 @@ def roadmap_markers(cell, roadmap, frame_id: str, stamp) -> bytes:
 def path_markers(cell, result, frame_id: str, stamp) -> bytes:
     """Return the serialised ``MarkerArray`` of ``path_scene``."""
     return marker_array(path_scene(cell, result.trajectory, frame_id, stamp))
+
+
+def arm_markers(cell, q, frame_id: str, stamp) -> bytes:
+    """Return the serialised ``MarkerArray`` of ``arm_scene``."""
+    return marker_array(arm_scene(cell, q, frame_id, stamp))
+
+
+def arm_scene(cell, q, frame_id: str, stamp) -> List[Marker]:
+    """
+    Return the markers of the arm at one configuration ``q`` (rad, (3,)), in ``frame_id``.
+
+    Drawn as a station's robot is (its links as capsules, the wafer disc at the wafer
+    centre), opaque, in the namespaces ``arm_wafer``, ``arm`` and ``arm_link_ends`` with
+    fixed ids: each publication moves the one arm (``node.sim``).
+    """
+    joints = cell.robot.arm.joint_points(np.asarray(q, float)[None])
+    return _bodies(_factory(frame_id, stamp), cell.robot, joints,
+                   ('arm_wafer', 'arm', 'arm_link_ends'))
 
 
 def roadmap_scene(cell, roadmap, frame_id: str, stamp) -> List[Marker]:
@@ -164,39 +184,52 @@ def _station_configs(cell) -> Tuple[List[Tuple[str, int]], List[np.ndarray]]:
 def _stations(cell, cell_marker, names, configs) -> List[Marker]:
     if not configs:
         return []
-    robot = cell.robot
-    joints = robot.arm.joint_points(np.array(configs))  # (K, 4, 2)
-    markers = []
-    for k, centre in enumerate(joints[:, 3]):
-        markers.append(cell_marker(
-            'station_wafers', k, Shape.CYLINDER, position=(*centre, 0.0),
-            scale=(2.0 * robot.wafer_radius, 2.0 * robot.wafer_radius, WAFER_THICKNESS)))
-    starts, ends = joints[:, :3], joints[:, 1:]
-    step = ends - starts
-    lengths = np.linalg.norm(step, axis=-1)
-    angle = np.arctan2(step[..., 1], step[..., 0])
-    half = np.sqrt(0.5)
-    for k in range(len(configs)):
-        for i, radius in enumerate(robot.link_radii):
-            # A cylinder's axis is its z: turn z a quarter turn about the in-plane normal
-            # of the link, onto the link.
-            markers.append(cell_marker(
-                'stations', 3 * k + i, Shape.CYLINDER,
-                position=(*(0.5 * (starts[k, i] + ends[k, i])), 0.0),
-                orientation=(-np.sin(angle[k, i]) * half, np.cos(angle[k, i]) * half, 0.0,
-                             half),
-                scale=(2.0 * radius, 2.0 * radius, lengths[k, i])))
-    for i, radius in enumerate(robot.link_radii):
-        ends_of_link = np.concatenate([joints[:, i], joints[:, i + 1]])
-        markers.append(cell_marker('station_link_ends', i, Shape.SPHERE_LIST,
-                                   points=ends_of_link, scale=(2.0 * radius,) * 3,
-                                   color=COLOURS['stations']))
+    joints = cell.robot.arm.joint_points(np.array(configs))  # (K, 4, 2)
+    markers = _bodies(cell_marker, cell.robot, joints,
+                      ('station_wafers', 'stations', 'station_link_ends'))
     offsets = _label_offsets(names, joints[:, 1, 1])
     for k, ((name, elbow), centre) in enumerate(zip(names, joints[:, 3])):
         markers.append(cell_marker(
             'station_labels', k, Shape.TEXT_VIEW_FACING,
             position=(centre[0], centre[1] + offsets[k], LABEL_Z),
             scale=(0.0, 0.0, LABEL_HEIGHT), text=f'{name} ({elbow_words(elbow)})'))
+    return markers
+
+
+def _bodies(cell_marker, robot, joints: np.ndarray, namespaces) -> List[Marker]:
+    """
+    Return the wafers, links and link ends of the robot at K configurations.
+
+    ``joints``: (K, 4, 2) their ``joint_points``; ``namespaces``: those of the wafers (a
+    disc each), the links (a cylinder of its radius each, id 3 k + link) and the link ends
+    (a sphere list per link, in the links' colour).
+    """
+    wafer_ns, link_ns, ends_ns = namespaces
+    markers = []
+    for k, centre in enumerate(joints[:, 3]):
+        markers.append(cell_marker(
+            wafer_ns, k, Shape.CYLINDER, position=(*centre, 0.0),
+            scale=(2.0 * robot.wafer_radius, 2.0 * robot.wafer_radius, WAFER_THICKNESS)))
+    starts, ends = joints[:, :3], joints[:, 1:]
+    step = ends - starts
+    lengths = np.linalg.norm(step, axis=-1)
+    angle = np.arctan2(step[..., 1], step[..., 0])
+    half = np.sqrt(0.5)
+    for k in range(len(joints)):
+        for i, radius in enumerate(robot.link_radii):
+            # A cylinder's axis is its z: turn z a quarter turn about the in-plane normal
+            # of the link, onto the link.
+            markers.append(cell_marker(
+                link_ns, 3 * k + i, Shape.CYLINDER,
+                position=(*(0.5 * (starts[k, i] + ends[k, i])), 0.0),
+                orientation=(-np.sin(angle[k, i]) * half, np.cos(angle[k, i]) * half, 0.0,
+                             half),
+                scale=(2.0 * radius, 2.0 * radius, lengths[k, i])))
+    for i, radius in enumerate(robot.link_radii):
+        ends_of_link = np.concatenate([joints[:, i], joints[:, i + 1]])
+        markers.append(cell_marker(ends_ns, i, Shape.SPHERE_LIST,
+                                   points=ends_of_link, scale=(2.0 * radius,) * 3,
+                                   color=COLOURS[link_ns]))
     return markers
 
 
