@@ -52,6 +52,18 @@ def buildable(every: List[kernels.Kernel]) -> Tuple[List[kernels.Kernel], List[k
     return [k for k in every if not reaches_objmode(k)], left
 
 
+def unlisted(manifest: dict) -> List[str]:
+    """
+    Return the modules of the package's buildable kernels a build's manifest does not list.
+
+    A module of kernels added since that build (its kernels would compile at their first
+    use): the manifest's own check covers only the modules it lists.
+    """
+    ours = [k for k in kernels.registered()
+            if k.__module__.split('.')[0] == kernels.__name__.split('.')[0]]
+    return sorted({k.__module__ for k in buildable(ours)[0]} - set(manifest['modules']))
+
+
 def _argument_type(numba_type) -> Optional[object]:
     """Return ``kernels_keys.argument_types``'s name of a numba type; None for other types."""
     from numba.core import types
@@ -107,8 +119,10 @@ def build(progress: Optional[Callable[[str], None]] = None) -> dict:
     try:
         manifest = kernels_lookup.ahead_manifest()
     except (kernels_lookup.NoBuildAhead, OSError):
-        pass
-    else:
+        manifest = None
+    if manifest is not None and unlisted(manifest):
+        manifest = None  # kernels added since: built again, with them
+    if manifest is not None:
         return {**found, 'built': False, 'seconds': time.monotonic() - begun,
                 'kernels': len(manifest['kernels']),
                 'signatures': sum(len(v) for v in manifest['kernels'].values())}

@@ -177,3 +177,12 @@ def test_the_node_loads_numbas_cache_when_the_build_does_not_load(monkeypatch, c
     assert any('could not be loaded: a build that does not load' in line for line in lines)
     assert loading.ahead == 0 and loading.loaded > 0
     assert lines[-1].startswith('planning kernels loaded in '), lines
+
+
+def test_a_module_of_kernels_added_since_a_build_has_it_built_again():
+    # A build's manifest checks only the modules it lists: one added later must count.
+    modules = sorted({k.__module__ for k in kernels_ahead.buildable(kernels.registered())[0]})
+    assert 'wafer_planner_ros.trajectory.braking' in modules
+    assert kernels_ahead.unlisted({'modules': modules}) == []
+    older = [m for m in modules if m != 'wafer_planner_ros.trajectory.braking']
+    assert kernels_ahead.unlisted({'modules': older}) == ['wafer_planner_ros.trajectory.braking']

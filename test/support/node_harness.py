@@ -49,6 +49,8 @@ class Peer:
                                                     '/wafer_planner/plan_request', RELIABLE)
         self.station_pub = self.peer.create_publisher(
             String, '/wafer_planner/plan_station_request', RELIABLE)
+        self.stop_pub = self.peer.create_publisher(String, '/wafer_planner/stop_request',
+                                                   RELIABLE)
         self.clients = {name: self.peer.create_client(kind, f'/wafer_planner/{name}')
                         for name, kind in (('get_status', Trigger),
                                            ('rebuild_roadmap', Trigger),
@@ -60,6 +62,7 @@ class Peer:
         self.thread.start()
         wait_for(lambda: self.joint_pub.get_subscription_count() > 0
                  and self.station_pub.get_subscription_count() > 0
+                 and self.stop_pub.get_subscription_count() > 0
                  and all(c.service_is_ready() for c in self.clients.values()), 20.0)
         wait_for(lambda: self.status()['ready']
                  and self.status()['busy_with'] not in ('load', 'kernels'), 120.0)
@@ -102,6 +105,10 @@ class Peer:
     def send_stations(self, request: dict) -> None:
         """Publish a station request (JSON)."""
         self.station_pub.publish(String(data=json.dumps(request)))
+
+    def send_stop(self, request: dict) -> None:
+        """Publish a stop request (JSON)."""
+        self.stop_pub.publish(String(data=json.dumps(request)))
 
     def send_joints(self, request_id: str, start, goal, joint_names=()) -> None:
         """Publish a joint request."""

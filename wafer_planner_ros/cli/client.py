@@ -5,7 +5,9 @@ FROM/TO are station names or ``q1,q2,q3`` (radians; a first angle may be negativ
 client finds the node (``--node``, default ``/wafer_planner``), waits until it reports
 ready (``~/get_status``), sends the request to ``~/plan_station_request`` and prints the
 ``~/result`` worded as ``wafer-plan`` words a plan (``--raw``: every value as sent), and
-the trajectory's size. Exit 0 when the plan is ok; 1 when the node answered with an error,
+the trajectory's size. ``--stop-after T`` then stops the move T seconds after it starts
+(``~/stop_request``: the controlled stop on its path) and prints the stop's answer too.
+Exit 0 when the plan (and the stop) is ok; 1 when the node answered with an error,
 did not answer within ``--timeout``, or was not found within ``DISCOVERY`` seconds; 2 on a
 bad command line.
 """
@@ -39,6 +41,9 @@ def main(argv=None) -> int:
     parser.add_argument('--load', choices=LOADS, default=LOADED,
                         help='loaded (the default: the wafer limit holds) or empty (joint '
                         'limits only: an empty move with a wafer on the blade can slide it)')
+    parser.add_argument('--stop-after', type=float, metavar='T',
+                        help='then stop the move T seconds after it starts (a stop request: '
+                        'the controlled stop on its path) and print the stop too')
     parser.add_argument('--raw', action='store_true',
                         help="print every value of the node's result as it was sent")
     args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
@@ -51,21 +56,31 @@ def main(argv=None) -> int:
     request = {'id': request_id, 'from': ends[0], 'to': ends[1]}
     if args.load != LOADED:
         request['load'] = args.load
-    answer = ask_planner(node, request, args.timeout, lambda text: print(text, file=sys.stderr))
+    if args.stop_after is not None and not args.stop_after >= 0.0:
+        parser.error(f'--stop-after must be a number of seconds >= 0, got {args.stop_after}')
+    answer = ask_planner(node, request, args.timeout, lambda text: print(text, file=sys.stderr),
+                         args.stop_after)
     if answer is None:
         print(f'{request_id}: no answer from {node} within {args.timeout:g} s',
               file=sys.stderr)
         return EXIT_FAILURE
-    status, trajectory = answer
-    values = {kv.key: kv.value for kv in status.values}
-    print(f'{request_id}: {status.message}')
-    lines = [f'{k}: {v}' for k, v in values.items()] if args.raw else described(values)
-    for line in lines:
-        print(f'  {line}')
-    if trajectory is not None:
-        print(f'  trajectory: {len(trajectory.points)} points, '
-              f'{len(trajectory.joint_names)} joints')
-    return EXIT_OK if values.get('code') == 'OK' else EXIT_FAILURE
+    codes = []
+    parts = [answer[:2]] + ([answer[2:]] if len(answer) > 2 else [])
+    for (status, trajectory), name in zip(parts, (request_id, f'{request_id}-stop')):
+        if status is None:
+            print(f'{name}: no answer from {node} within {args.timeout:g} s', file=sys.stderr)
+            codes.append('')
+            continue
+        values = {kv.key: kv.value for kv in status.values}
+        codes.append(values.get('code'))
+        print(f'{name}: {status.message}')
+        lines = [f'{k}: {v}' for k, v in values.items()] if args.raw else described(values)
+        for line in lines:
+            print(f'  {line}')
+        if trajectory is not None:
+            print(f'  trajectory: {len(trajectory.points)} points, '
+                  f'{len(trajectory.joint_names)} joints')
+    return EXIT_OK if all(code == 'OK' for code in codes) else EXIT_FAILURE
 
 
 def described(values: dict) -> list:

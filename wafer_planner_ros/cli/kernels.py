@@ -34,6 +34,11 @@ def main(argv=None) -> int:
         manifest, unbuilt = kernels_lookup.ahead_manifest(), ''
     except (kernels_lookup.NoBuildAhead, OSError) as exc:
         manifest, unbuilt = None, str(exc)
+    if manifest is not None:
+        # A module of kernels added since the build: its kernels would compile at first use.
+        unlisted = kernels_ahead.unlisted(manifest)
+        if unlisted:
+            manifest, unbuilt = None, f'{", ".join(unlisted)} not built ahead of time'
     if args.check or (not missing and manifest is not None):
         if missing:
             print(f'{len(missing)} of {len(kernels.registered())} planning kernels are not '

@@ -1,7 +1,8 @@
 """
 wafer-replay: re-plan the queries of a recording, or send them to a running node.
 
-``--compare`` (the default) re-plans every recorded request offline, with the recorded cell,
+``--compare`` (the default) re-plans every recorded request offline (a stop request: the
+controlled stop of the replayed move it names), with the recorded cell,
 roadmap size and seed, and the parameters in force when it arrived, and prints the recorded
 and replayed answer and cycle time of each query. Exit 1 when any differs (code, or cycle
 time by more than ``--tolerance``). Answers that depended on the node's load at the time
@@ -20,7 +21,7 @@ from typing import Optional, Tuple
 
 from wafer_planner_ros.cli.common import (EXIT_FAILURE, EXIT_OK, Progress, recorded_queries,
                                           run, UsageError, write_json)
-from wafer_planner_ros.errors import CellError, PlanningError
+from wafer_planner_ros.errors import CellError, ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.compare import (DEFAULT_TOLERANCE, judge, OK, row_for,
                                                  summary, table)
@@ -28,7 +29,7 @@ from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query
 from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.planning import PlanningService, within_budget
-from wafer_planner_ros.service.requests import request_of, RequestError
+from wafer_planner_ros.service.requests import request_of, RequestError, stop_request
 
 
 class Replayer:
@@ -38,6 +39,11 @@ class Replayer:
         """Use the roadmap cache in ``cache_dir`` (None: build every roadmap)."""
         self.cache_dir, self.quiet = cache_dir, quiet
         self._planners = {}
+        self._answers = {}
+        """request id -> (planner, result) of the answers replayed so far: what a stop
+        request names, as the node kept what it published."""
+        self._unreplayed = set()
+        """The request ids of queries not replayed: a stop of one is not replayed either."""
 
     def planner(self, query: Query) -> Planner:
         """
@@ -83,14 +89,23 @@ class Replayer:
         Return (code, cycle time or None) of answering ``query`` again as the node did.
 
         The code is '' when it cannot be (the node's load decided it, or no roadmap had
-        been loaded when it arrived).
+        been loaded when it arrived, or it stops a move that was not replayed).
         """
+        code, cycle_time = self._answer(query)
+        if not code:
+            self._unreplayed.add(query.request_id)
+        return code, cycle_time
+
+    def _answer(self, query: Query) -> Tuple[str, Optional[float]]:
+        """Return what ``answer`` does, without noting what was not replayed."""
         if query.code in NODE_ONLY_CODES:
             return '', None
         values = query.result.values if query.result is not None else {}
         if within_budget(query.kind == 'station', values,
                          query.parameters.get('planning.optimise_budget', 0.0)):
             return '', None  # the optimisation stopped when its time was up
+        if query.kind == 'stop':
+            return self._stop(query)
         try:
             if query.load is None:  # only a station request can be read without the cell
                 if query.kind != 'station':
@@ -103,7 +118,33 @@ class Replayer:
                                                      load=request.load)
         except (RequestError, PlanningError) as exc:
             return exc.code.value, None
+        self._answers[request.request_id] = (planner, result)
         return OK, result.cycle_time
+
+    def _stop(self, query: Query) -> Tuple[str, Optional[float]]:
+        """
+        Return (code, cycle time) of a stop request replayed on the move it names.
+
+        The move is the replayed answer of the request it names, so a stop of a move that
+        was not replayed (a budgeted or a node-only answer) is not replayed either ('').
+        """
+        try:
+            request = stop_request(query.request.data)
+        except RequestError as exc:
+            return exc.code.value, None
+        kept = self._answers.get(request.trajectory)
+        if kept is None:
+            if request.trajectory in self._unreplayed:
+                return '', None
+            return ErrorCode.UNKNOWN_TRAJECTORY.value, None
+        planner, move = kept
+        try:
+            stopped = planner.stop(move.trajectory, request.at, request.trajectory,
+                                   move.load)
+        except PlanningError as exc:
+            return exc.code.value, None
+        self._answers[request.request_id] = (planner, stopped)
+        return OK, stopped.cycle_time
 
 
 def main(argv=None) -> int:

@@ -95,18 +95,30 @@ class PlannerPeer(Node):
 
 
 def ask_planner(planner: str, request: dict, timeout: float,
-                say: Callable[[str], None] = lambda text: None) -> Optional[tuple]:
+                say: Callable[[str], None] = lambda text: None,
+                stop_after: Optional[float] = None) -> Optional[tuple]:
     """
     Return (result, trajectory or None) of a station request to ``planner``.
 
     None when no answer came within ``timeout`` seconds (or on Ctrl-C); raise
-    ``NoPlannerNode`` when the node is not found.
+    ``NoPlannerNode`` when the node is not found. ``stop_after``: then, ``stop_after``
+    seconds after the trajectory's start (its ``header.stamp``), send a stop request of it
+    (id: the request's with ``-stop``) and return (result, trajectory, stop result, stop
+    trajectory); the stop's answer is waited for up to ``timeout`` seconds more.
     """
     rclpy.init()
     try:
         client = _Client(planner)
         try:
-            return client.ask(request, timeout, say)
+            answer = client.ask(request, timeout, say)
+            if answer is None or stop_after is None or answer[1] is None:
+                return answer
+            stamp = answer[1].header.stamp
+            time.sleep(max(0.0, stamp.sec + 1e-9 * stamp.nanosec + stop_after - time.time()))
+            stop = {'id': f"{request['id']}-stop", 'trajectory': request['id'],
+                    'at': stop_after}
+            stopped = client.ask(stop, timeout, say, client.stops)
+            return answer + ((None, None) if stopped is None else stopped)
         finally:
             client.destroy_node()
     except KeyboardInterrupt:
@@ -124,13 +136,20 @@ class _Client(PlannerPeer):
                                  RELIABLE)
         self.requests = self.create_publisher(String, f'{planner}/plan_station_request',
                                               RELIABLE)
+        self.stops = self.create_publisher(String, f'{planner}/stop_request', RELIABLE)
 
-    def ask(self, request: dict, timeout: float, say: Callable[[str], None] = lambda t: None):
-        """Return (result, trajectory or None) for the request, or None after ``timeout``."""
+    def ask(self, request: dict, timeout: float, say: Callable[[str], None] = lambda t: None,
+            publisher=None):
+        """
+        Return (result, trajectory or None) for the request, or None after ``timeout``.
+
+        ``publisher``: where the request goes (default: the station requests).
+        """
         deadline = time.monotonic() + timeout
-        if not self.wait_ready(deadline, [self.requests], say):
+        publisher = publisher or self.requests
+        if not self.wait_ready(deadline, [publisher], say):
             return None
-        self.requests.publish(String(data=json.dumps(request)))
+        publisher.publish(String(data=json.dumps(request)))
         rid = request['id']
         while (result := self._answer(rid)) is None:
             if time.monotonic() > deadline:

@@ -60,6 +60,7 @@ from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
+from wafer_planner_ros.service.requests import stop_request
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
 
 # Requests and answers: reliable and keep-all, so that a burst is delivered whole (a
@@ -118,12 +119,15 @@ class WaferPlannerNode(Node):
             JointTrajectory, '~/plan_request', self._on_joint_request, RELIABLE, raw=True)
         self._station_sub = self.create_subscription(
             String, '~/plan_station_request', self._on_station_request, RELIABLE, raw=True)
+        self._stop_sub = self.create_subscription(
+            String, '~/stop_request', self._on_stop_request, RELIABLE, raw=True)
         self._numbers = itertools.count(1)
         self._late_records = 0
         self._recording = NodeRecording(self.get_name(), [
             Topic(self._joint_sub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
                   RELIABLE_OFFERED),
             Topic(self._station_sub.topic_name, 'std_msgs/msg/String', RELIABLE_OFFERED),
+            Topic(self._stop_sub.topic_name, 'std_msgs/msg/String', RELIABLE_OFFERED),
             Topic(self._trajectory_pub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
                   RELIABLE_OFFERED),
             Topic(self._result_pub.topic_name, 'diagnostic_msgs/msg/DiagnosticStatus',
@@ -151,6 +155,9 @@ class WaferPlannerNode(Node):
 
     def _on_station_request(self, data: bytes, info) -> None:
         self._on_request('station', self._station_sub.topic_name, String, data, info)
+
+    def _on_stop_request(self, data: bytes, info) -> None:
+        self._on_request('stop', self._stop_sub.topic_name, String, data, info)
 
     def _on_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
         try:
@@ -182,6 +189,9 @@ class WaferPlannerNode(Node):
                                               ErrorCode.ROADMAP_NOT_READY,
                                               'not ready: the cell is being loaded', None, None)
                     return
+            if kind == 'stop':
+                self._worker.stops.enqueue(number, stop_request(msg.data), received)
+                return
             request = request_of(kind, msg, cell.robot.joint_names if cell is not None else ())
         except RequestError as exc:
             self._worker.answer_error(number, exc.request_id, exc.code, exc.message, None,

@@ -37,7 +37,8 @@ def publish(found: List[Query], node: str, timeout: float, tolerance: float) -> 
             'station': peer.create_publisher(String, f'{planner}/plan_station_request',
                                              RELIABLE),
             'joint': peer.create_publisher(JointTrajectory, f'{planner}/plan_request',
-                                           RELIABLE)}
+                                           RELIABLE),
+            'stop': peer.create_publisher(String, f'{planner}/stop_request', RELIABLE)}
         if not peer.wait_ready(time.monotonic() + timeout, publishers.values()):
             raise WaferPlannerError(f'{planner} was not ready within {timeout:g} s')
         live = peer.planner_status().get('hash', '')

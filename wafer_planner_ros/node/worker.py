@@ -7,8 +7,9 @@ table holds never waits behind planning: the answering thread gives it at once (
 queue of its own, as long). Every queued request is answered by ``planning.timeout``
 seconds after its receipt: the watchdog thread answers ``TIMEOUT`` at that instant for one
 not answered yet (waiting or still being planned), and a plan finished later is dropped,
-never sent. The roadmap is loaded and rebuilt by the worker's loader (``loader``: its own
-thread, the same lock); until a roadmap serves, every request is answered
+never sent. Every answer published is kept for stop requests, which its ``stops``
+answers on a thread of their own. The roadmap is loaded and rebuilt by the worker's loader
+(``loader``: its own thread, the same lock); until a roadmap serves, every request is answered
 ``ROADMAP_NOT_READY`` at once, saying why. Each request is planned on the
 roadmap in force when it was received, the one a recording pairs it with, and answered as
 ``service.planning`` says. The worker never
@@ -34,6 +35,7 @@ from wafer_planner_ros.node.loader import Phase, RoadmapLoader
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.serving import Serving, table_counts
+from wafer_planner_ros.node.stops import Stops
 from wafer_planner_ros.service.settings import NodeSettings
 
 PREVIOUS_KEPT_NS = 1_000_000_000
@@ -78,6 +80,8 @@ class PlanningWorker:
         self.last_error = ''
         self._loader = RoadmapLoader(self.lock, settings, recording, send, self._logger, stamp,
                                      self._load_failed)
+        self.stops = Stops(send, self.answer_error, self.answer_internal, self._logger)
+        """The published trajectories and the stop requests' own thread (``stops``)."""
         self._threads = [threading.Thread(target=target, name=name, daemon=True) for name, target
                          in (('wafer_planner_worker', lambda: self._work(self._backlog)),
                              ('wafer_planner_table', lambda: self._work(self._lane)),
@@ -202,6 +206,7 @@ class PlanningWorker:
     def request_stop(self) -> None:
         """Have the threads stop taking work (see ``join``)."""
         self._loader.enter(Phase.STOPPING)
+        self.stops.stop()
 
     def join(self, timeout: float) -> None:
         """
@@ -213,6 +218,7 @@ class PlanningWorker:
         deadline = time.monotonic() + timeout
         for thread in self._threads + [self._loader.thread]:
             thread.join(max(0.0, deadline - time.monotonic()))
+        self.stops.join(max(0.0, deadline - time.monotonic()))
 
     # ----------------------------------------------------------------- planning
 
@@ -348,6 +354,7 @@ class PlanningWorker:
                               'was answered TIMEOUT; not sent')
             return
         self._send((Sent.ANSWER, answer, number))
+        self.stops.keep(request.request_id, planner, result, roadmap, stamp)
         with self.lock:
             self.counts['served'] += 1
         try:

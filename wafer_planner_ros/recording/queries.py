@@ -67,19 +67,25 @@ class Result:
     published_ns: int
 
 
+REQUEST_KINDS = ('station', 'joint', 'stop')
+"""The kinds of request a recording holds: plan requests by station or joint angles, and
+stop requests of a published trajectory."""
+
+
 @dataclass(frozen=True)
 class Query:
     """One request and everything recorded about it."""
 
     number: int
     kind: str
-    """'station' or 'joint'."""
+    """'station', 'joint' or 'stop' (``REQUEST_KINDS``)."""
     topic: str
     received_ns: int
     data: bytes
     """The request's serialised bytes, as received."""
     request: object
-    """The decoded request (``std_msgs/String`` or ``trajectory_msgs/JointTrajectory``)."""
+    """The decoded request (``std_msgs/String`` or ``trajectory_msgs/JointTrajectory``; a stop
+    request is a ``std_msgs/String``)."""
     result: Optional[Result] = None
     trajectory: Optional[Trajectory] = None
     load: Optional[Load] = None
@@ -119,7 +125,7 @@ def queries(recording: Recording) -> List[Query]:
     for message in recording.messages:
         channel = recording.channels[message.channel_id]
         kind = _kind(channel.topic)
-        if kind in ('station', 'joint'):
+        if kind in REQUEST_KINDS:
             requests[message.sequence] = (kind, channel.topic, message)
         elif kind == 'result':
             results[message.sequence] = message
@@ -145,6 +151,7 @@ def queries(recording: Recording) -> List[Query]:
 
 def _kind(topic: str) -> str:
     for suffix, kind in (('/plan_station_request', 'station'), ('/plan_request', 'joint'),
+                         ('/stop_request', 'stop'),
                          ('/result', 'result'), ('/trajectory', 'trajectory')):
         if topic.endswith(suffix):
             return kind

@@ -35,6 +35,8 @@ QUOTE = 200
 """Most characters of a request's value that an error message quotes."""
 KEYS = ('id', 'from', 'to', 'load')
 """The keys of a station request (``load`` optional)."""
+STOP_KEYS = ('id', 'trajectory', 'at')
+"""The keys of a stop request."""
 LEADING_ID = re.compile(r'\s*\{\s*"id"\s*:\s*("(?:[^"\\\x00-\x1f]|\\.){1,%d}")' % MAX_ID)
 """A request text's id when it is the first key, read without reading the rest: its string
 literal (each character, or escape, of at most ``MAX_ID``)."""
@@ -53,6 +55,17 @@ class Request:
     """The robot's joint names the ends were read against (ordered, counted); () if none."""
     load: str = LOADED
     """The limit set to plan against (``cell.limits``): loaded unless the request says."""
+
+
+@dataclass(frozen=True)
+class StopRequest:
+    """A controlled stop of a published trajectory, ready for the planner."""
+
+    request_id: str
+    trajectory: str
+    """The id of the trajectory to stop (the request id it was published under)."""
+    at: float
+    """s after that trajectory's start."""
 
 
 class RequestError(Exception):
@@ -160,6 +173,57 @@ def joint_request(request_id: str, joint_names: Sequence[str],
 
 def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
     """Return the request of a station request's JSON text (see ``request_of``)."""
+    data = _json_object(text)
+    request_id = request_id_of(data.get('id'))
+    _only_keys(data, KEYS, 'a station request has only "id", "from", "to" and "load"',
+               request_id)
+    ends = []
+    for key in ('from', 'to'):
+        if key not in data:
+            raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
+                               request_id)
+        ends.append(_end(data[key], key, request_id, robot_joints))
+    load = data.get('load', LOADED)
+    if load not in LOADS:
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"load" must be one of {quote(list(LOADS))}, got {quote(load)}',
+                           request_id)
+    return Request(request_id, ends[0], ends[1], tuple(robot_joints), load)
+
+
+def stop_request(text: str) -> StopRequest:
+    """
+    Return the stop request of its JSON text: ``{"id", "trajectory", "at"}``, nothing else.
+
+    ``trajectory``: the id of a trajectory the node published; ``at``: seconds after its
+    start, a finite number (whether it lies within the trajectory is the planner's to say).
+    """
+    data = _json_object(text)
+    request_id = request_id_of(data.get('id'))
+    _only_keys(data, STOP_KEYS, 'a stop request has only "id", "trajectory" and "at"',
+               request_id)
+    for key in STOP_KEYS[1:]:
+        if key not in data:
+            raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
+                               request_id)
+    trajectory = data['trajectory']
+    if not isinstance(trajectory, str) or not trajectory:
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"trajectory" must be the id of a published trajectory, got '
+                           f'{quote(trajectory)}', request_id)
+    _check_text(trajectory, '"trajectory"', MAX_ID, request_id)
+    at = data['at']
+    if isinstance(at, _NotFinite):
+        raise RequestError(ErrorCode.NOT_FINITE, f'"at" is {at.quoted}, not a finite number',
+                           request_id)
+    if isinstance(at, bool) or not isinstance(at, (int, float)):
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"at" must be a number of seconds, got {quote(at)}', request_id)
+    return StopRequest(request_id, trajectory, float(at))
+
+
+def _json_object(text: str) -> '_Object':
+    """Return a request's JSON object; raise RequestError (with its leading id) if not one."""
     if len(text) > MAX_TEXT:
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request is {len(text)} characters long; at most {MAX_TEXT}',
@@ -176,28 +240,20 @@ def station_request(text: str, robot_joints: Sequence[str] = ()) -> Request:
     if not isinstance(data, dict):
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request must be a JSON object, got {quote(data)}')
-    request_id = request_id_of(data.get('id'))
+    return data
+
+
+def _only_keys(data: '_Object', keys: Sequence[str], which: str, request_id: str) -> None:
+    """Raise RequestError for a key given twice or one not in ``keys`` (``which``: those)."""
     if data.repeated:
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request has {quote(data.repeated)} more than once', request_id)
-    unknown = [key for key in data if key not in KEYS]
+    unknown = [key for key in data if key not in keys]
     if unknown:
         # Refused, not ignored: a key the planner does not read would look obeyed.
         raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'the request has unknown keys {quote(unknown)}; a station request '
-                           'has only "id", "from", "to" and "load"', request_id)
-    ends = []
-    for key in ('from', 'to'):
-        if key not in data:
-            raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
-                               request_id)
-        ends.append(_end(data[key], key, request_id, robot_joints))
-    load = data.get('load', LOADED)
-    if load not in LOADS:
-        raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'"load" must be one of {quote(list(LOADS))}, got {quote(load)}',
+                           f'the request has unknown keys {quote(unknown)}; {which}',
                            request_id)
-    return Request(request_id, ends[0], ends[1], tuple(robot_joints), load)
 
 
 def quote(value, limit: int = QUOTE) -> str:

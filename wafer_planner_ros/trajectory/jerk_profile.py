@@ -73,6 +73,22 @@ class JerkProfile:
         inside = (turn > low) & (turn < high)
         return np.where(inside, np.maximum(peaks, speed(np.where(inside, turn, low))), peaks)
 
+    def turns(self) -> np.ndarray:
+        """
+        Return times between which sigma'' keeps its sign, so sigma' is monotone (ascending).
+
+        sigma'' is continuous and linear on each phase: it changes sign only where it is
+        zero, inside a phase or at a phase's start; all those times are returned.
+        """
+        tau = np.diff(self.starts)
+        a, j = self.states[:-1, 2], self.jerks
+        with np.errstate(divide='ignore', invalid='ignore'):
+            inner = np.where(j != 0.0, -a / j, -1.0)
+        within = (inner > 0.0) & (inner < tau)
+        at_start = self.states[1:-1, 2] == 0.0
+        return np.unique(np.concatenate([self.starts[:-1][within] + inner[within],
+                                         self.starts[1:-1][at_start]]))
+
     def slowest(self) -> float:
         """Return the least sigma' over the profile (exact: each phase's ends and turn)."""
         tau = np.diff(self.starts)

@@ -57,39 +57,51 @@ class Retimed(Trajectory):
     def evaluate_orders(self, t, orders=(0, 1, 2)) -> tuple:
         """Return the derivatives of the given orders at times t, each (len(t), J)."""
         sigma = self.timing.evaluate(t)
-        derivatives = self.base.evaluate_orders(sigma[:, 0], range(4))
+        # A contiguous copy: the base's kernels then run the same compiled code as for any
+        # other times (a strided column may take another build, rounded differently).
+        derivatives = self.base.evaluate_orders(np.ascontiguousarray(sigma[:, 0]), range(4))
         return tuple(along(derivatives, sigma, orders))
 
     def breaks(self) -> np.ndarray:
-        """Return the timing's phase starts and the times sigma crosses a base break."""
-        states, starts = self.timing.states, self.timing.starts
+        """
+        Return 0, T, the times sigma crosses a base break and those sigma' turns.
+
+        Between two of them the base is one of its pieces and sigma' is monotone
+        (``JerkProfile.turns``), which is what ``peak_speed`` needs: a stop's timing of
+        hundreds of short phases is a few pieces to prove.
+        """
+        timing = self.timing
+        states, starts = timing.states, timing.starts
         base = self.base.breaks()
         inside = base[(base > states[0, 0]) & (base < states[-1, 0])]
-        if not len(inside):
-            return starts
-        # sigma never decreases: the phase holding each crossing, then halving within it.
-        phase = np.clip(np.searchsorted(states[:, 0], inside, side='right') - 1, 0,
-                        len(self.timing.jerks) - 1)
-        low, high = starts[phase].copy(), starts[phase + 1].copy()
-        for _ in range(CROSSING_HALVINGS):
-            middle = 0.5 * (low + high)
-            below = self.timing.evaluate(middle)[:, 0] < inside
-            low, high = np.where(below, middle, low), np.where(below, high, middle)
-        return np.unique(np.concatenate([starts, high]))
+        crossings = np.empty(0)
+        if len(inside):
+            # sigma never decreases: the phase holding each crossing, then halving within it.
+            phase = np.clip(np.searchsorted(states[:, 0], inside, side='right') - 1, 0,
+                            len(timing.jerks) - 1)
+            low, high = starts[phase].copy(), starts[phase + 1].copy()
+            for _ in range(CROSSING_HALVINGS):
+                middle = 0.5 * (low + high)
+                below = timing.evaluate(middle)[:, 0] < inside
+                low, high = np.where(below, middle, low), np.where(below, high, middle)
+            crossings = high
+        return np.unique(np.concatenate([[0.0, self.duration], timing.turns(), crossings]))
 
     def peak_speed(self, a, b) -> np.ndarray:
         """
         Return a bound of every |q'_j| on each [a_k, b_k] within one piece, (K, J).
 
         The base's exact largest |g'_j| over the stretch of path [sigma(a), sigma(b)]
-        times the timing's exact largest sigma' on [a, b]: what the proof and the
-        verification's collision steps need.
+        times the largest sigma' on [a, b], exact: sigma' is monotone within a piece, so
+        it is the larger of its ends'. What the proof and the verification's collision
+        steps need.
         """
         a, b = np.atleast_1d(np.asarray(a, float)), np.atleast_1d(np.asarray(b, float))
-        sigma = self.timing.evaluate(np.concatenate([a, b]))[:, 0]
+        sigma = self.timing.evaluate(np.concatenate([a, b]))
         k = len(a)
-        return self.base.peak_speed(sigma[:k], sigma[k:]) * \
-            self.timing.peak_speed(a, b)[:, None]
+        speed = np.maximum(np.abs(sigma[:k, 1]), np.abs(sigma[k:, 1]))
+        return self.base.peak_speed(np.ascontiguousarray(sigma[:k, 0]),
+                                    np.ascontiguousarray(sigma[k:, 0])) * speed[:, None]
 
     def ill_formed(self, start: np.ndarray, goal: np.ndarray) -> Optional[str]:
         """

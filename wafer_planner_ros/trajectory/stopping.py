@@ -13,18 +13,16 @@ the path's derivatives by sigma,
 - jerk: |g''' sigma'^3 + 3 g'' sigma' sigma'' + g' sigma'''| <= J per joint;
 - velocity: |g' sigma'| <= V holds already, sigma' never exceeding 1.
 
-The timing is built forwards in steps of ``STEP`` seconds of constant jerk
-(``_brake``, compiled): brake as hard as the jerk allows, down to the largest deceleration
-the acceleration limits leave at each state, and ease the deceleration off at the moment
-that brings sigma' and sigma'' to zero together with the jerk still within its limit
-(sigma'' = -sqrt(2 J' sigma'), J' the jerk then available): the time-optimal stop of one
-axis (Ruckig's velocity interface) with bounds that follow the path. The limits along the
-path between the steps are linear between samples ``GRID`` seconds of path time apart.
-Checked then exactly as the verification checks every answer (``verify.limit_ratios``);
-a stop that misses a limit between the steps is built again keeping a smaller share of
-each limit (``SHARES``). Where none keeps them all, or none is sooner at rest, the rest of
-the curve itself is the stop (verified, it ends at rest): on a time-optimal move that is
-already braking as hard as its limits allow to its goal, nothing on its path stops sooner.
+The timing is built forwards in steps of ``STEP`` seconds of constant jerk by a compiled
+kernel (``braking.brake``) on the path's derivatives sampled every ``GRID`` seconds of its
+own time and on both sides of each of its breaks: brake as hard as the limits allow, and
+ease the deceleration off in time to come to rest within the jerk limits. Each stop is
+then checked ten times as densely as the verification checks an answer (``_keeps``); one
+that misses a limit is built again keeping a smaller share of each limit (``SHARES``), and
+where none keeps them all, after following the move a little first (``COASTS``). Where
+none is sooner at rest, the rest of the curve itself is the stop (verified, it ends at
+rest): on a time-optimal move that is already braking to its goal as hard as its limits
+allow, nothing on its path stops much sooner.
 """
 
 from dataclasses import dataclass
@@ -33,7 +31,7 @@ from typing import Optional
 import numpy as np
 
 from wafer_planner_ros.errors import ErrorCode, PlanningError
-from wafer_planner_ros.kernels import kernel
+from wafer_planner_ros.trajectory.braking import brake, GAVE_UP, PAST
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
 from wafer_planner_ros.trajectory.retimed import Retimed
@@ -41,6 +39,8 @@ from wafer_planner_ros.trajectory.verify import limit_ratios
 
 STEP = 0.002
 """s: the time of one constant-jerk phase of a stop's timing."""
+BREAK_SIDE = 1e-9
+"""s: how far before each of the curve's breaks its piece there is sampled (``_path``)."""
 GRID = 0.0005
 """s of the curve's own time between the samples of the limits along the path."""
 DENSE = 1e-4
@@ -51,10 +51,11 @@ MAX_STEPS = 20_000
 """Phases of one stop at most (40 s): a stop never lasts so long on a planned curve."""
 SHARES = (1.0, 0.995, 0.98)
 """The shares of each limit the stop's timing keeps, tried in turn (the module)."""
+COASTS = (0.0, 0.02, 0.08)
+"""s the move is followed before braking, tried in turn where braking at once keeps no
+share of the limits (``_braked``)."""
 HALVINGS = 12
 """Halvings that find how hard a step may brake where the hardest would not ease off."""
-TOLERANCE = 1e-9
-"""Relative: how far a state may be past a bound and count as on it (``_eases``)."""
 AT_REST = 1e-9
 """rad/s, rad/s^2: a curve whose velocity and acceleration are no larger is at rest."""
 
@@ -118,22 +119,55 @@ def controlled_stop(trajectory: Trajectory, at: float, robot) -> Stop:
 
 
 def _braked(trajectory, at, robot, acceleration, jerk, wafer) -> Optional[Stop]:
-    """Return the stop braked step by step (``_brake``) that keeps every limit, or None."""
-    window = min(WINDOW, trajectory.duration - at)
-    while True:
-        path = _path(trajectory, robot.arm, at, at + window)
-        for share in SHARES:
-            phases, ended = _timing(path, acceleration, jerk, wafer, share)
-            if not ended:
-                break  # past the sampled window: sample more of the path
-            stop = Retimed(trajectory, JerkProfile(*phases))
-            if _keeps(stop, robot):
-                return Stop(stop, share, 'braked')
-        else:
+    """
+    Return the soonest braked stop (``braking.brake``) that keeps every limit, or None.
+
+    Braking at once first; where no share of the limits keeps them all, the move is
+    followed a while before braking (``COASTS``): limits that a curve already at them
+    leaves no room in for braking give room a little further on.
+    """
+    left = trajectory.duration - at
+    window = min(WINDOW, left)
+    for coast in COASTS:
+        if coast >= left:
             return None
-        if at + window >= trajectory.duration:
-            return None
-        window = min(2.0 * window, trajectory.duration - at)
+        while True:
+            path = _path(trajectory, robot.arm, at, min(at + coast + window, at + left))
+            stop, ended = _shares(trajectory, path, at + coast, coast, robot, acceleration,
+                                  jerk, wafer)
+            if stop is not None:
+                return stop
+            if ended or coast + window >= left:
+                break
+            window = min(2.0 * window, left - coast)
+    return None
+
+
+def _shares(trajectory, path, begin, coast, robot, acceleration, jerk, wafer) -> tuple:
+    """
+    Return (stop or None, whether every try ended): braking from ``begin`` at each share.
+
+    A try that runs past the samples ends none: the caller samples more of the path.
+    """
+    for share in SHARES:
+        phases, status = _timing(path, begin, acceleration, jerk, wafer, share)
+        if status == PAST:
+            return None, False
+        if status == GAVE_UP:
+            continue
+        if coast > 0.0:
+            phases = _coasted(phases, begin - coast, coast)
+        stop = Retimed(trajectory, JerkProfile(*phases))
+        if _keeps(stop, robot):
+            return Stop(stop, share, 'braked'), True
+    return None, True
+
+
+def _coasted(phases: tuple, at: float, coast: float) -> tuple:
+    """Return a stop's phases after ``coast`` s following the move from ``at`` (sigma = t)."""
+    starts, jerks, states = phases
+    return (np.concatenate([[0.0], starts + coast]), np.concatenate([[0.0], jerks]),
+            np.concatenate([[[at, 1.0, 0.0]], states]))
 
 
 def _keeps(stop: Trajectory, robot) -> bool:
@@ -170,214 +204,32 @@ def hold_demand(trajectory: Trajectory, at: float, robot, samples: int = 2001) -
 
 
 def _path(trajectory: Trajectory, arm, begin: float, end: float) -> tuple:
-    """Return the path's samples from ``begin`` to ``end`` (its own time) for ``_brake``."""
+    """
+    Return the path's samples from ``begin`` to ``end`` (its own time) for ``braking.brake``.
+
+    Every ``GRID`` seconds, and on both sides of each of the curve's breaks (where its
+    higher derivatives jump: a jump is then never smeared over a sample's width).
+    """
     count = max(int(np.ceil((end - begin) / GRID)), 1) + 1
-    s = np.linspace(begin, end, count)
+    breaks = trajectory.breaks()
+    breaks = breaks[(breaks > begin) & (breaks < end)]
+    s = np.unique(np.concatenate([np.linspace(begin, end, count), breaks,
+                                  breaks - BREAK_SIDE]))
     q, g1, g2, g3 = trajectory.evaluate_orders(s, range(4))
     zero = np.zeros_like(g1)
     w2 = arm.wafer_acceleration(q, g1, g2)
     w1 = arm.wafer_acceleration(q, zero, g1)
-    return s, g1, g2, g3, w1, w2
+    return s, breaks, g1, g2, g3, w1, w2
 
 
-def _timing(path: tuple, acceleration, jerk, wafer, share: float) -> tuple:
-    """Return ((starts, jerks, states), whether it came to rest within the samples)."""
-    s, g1, g2, g3, w1, w2 = path
+def _timing(path: tuple, begin: float, acceleration, jerk, wafer, share: float) -> tuple:
+    """Return ((starts, jerks, states), status: ``RESTED``, ``PAST`` or ``GAVE_UP``)."""
+    s, breaks, g1, g2, g3, w1, w2 = path
     starts = np.empty(MAX_STEPS + 1)
     jerks = np.empty(MAX_STEPS)
     states = np.empty((MAX_STEPS + 1, 3))
-    count, ended = _brake(s[0], s[1] - s[0], len(s), g1, g2, g3, w1, w2,
+    count, status = brake(s, breaks, g1, g2, g3, w1, w2,
                           np.asarray(acceleration, float) * share, jerk * share,
-                          wafer * share, STEP, HALVINGS, starts, jerks, states)
+                          wafer * share, STEP, HALVINGS, begin, starts, jerks, states)
     return (starts[:count + 1].copy(), jerks[:count].copy(),
-            states[:count + 1].copy()), bool(ended)
-
-
-@kernel(nogil=True)
-def _interval(lo, hi, a, b, limit):
-    """Narrow [lo, hi] to the x with |b + a x| <= limit (a constraint that fixes none: kept)."""
-    if abs(a) > 1e-12:
-        x1, x2 = (-limit - b) / a, (limit - b) / a
-        lo = max(lo, min(x1, x2))
-        hi = min(hi, max(x1, x2))
-    return lo, hi
-
-
-@kernel(nogil=True)
-def _sample(values, k, f, j):
-    """Return ``values[k, j]`` and ``values[k + 1, j]`` mixed by f."""
-    return values[k, j] * (1.0 - f) + values[k + 1, j] * f
-
-
-@kernel(nogil=True)
-def _place(s0, ds, count, s):
-    """Return (sample k, fraction to the next) of path time s; k = -1 past the samples."""
-    x = (s - s0) / ds
-    k = int(np.floor(x))
-    if k < 0:
-        k = 0
-    if k >= count - 1:
-        return -1, 0.0
-    return k, x - k
-
-
-@kernel(nogil=True)
-def _bounds(s0, ds, count, g1, g2, g3, w1, w2, acceleration, jerk, wafer, s, v, u, h):
-    """
-    Return (least sigma'', most sigma'', least sigma''', most sigma''') at (s, v, u).
-
-    The acceleration limits bound sigma'' at (s, v); the jerk limits bound a jerk held
-    for ``h`` s from (s, v, u), at both ends of that step (sigma'' moves with it).
-    (nan, nan, nan, nan) past the samples.
-    """
-    k, f = _place(s0, ds, count, s)
-    s1 = s + h * (v + h * u / 2.0)
-    v1 = v + h * u
-    k1, f1 = _place(s0, ds, count, s1)
-    if k < 0 or k1 < 0:
-        return np.nan, np.nan, np.nan, np.nan
-    ulo, uhi, jlo, jhi = -np.inf, np.inf, -np.inf, np.inf
-    for j in range(3):
-        a1 = _sample(g1, k, f, j)
-        a2 = _sample(g2, k, f, j)
-        a3 = _sample(g3, k, f, j)
-        ulo, uhi = _interval(ulo, uhi, a1, a2 * v * v, acceleration[j])
-        jlo, jhi = _interval(jlo, jhi, a1, a3 * v * v * v + 3.0 * a2 * v * u, jerk[j])
-        # At the step's end, where sigma'' has become u + h j.
-        b1, b2, b3 = _sample(g1, k1, f1, j), _sample(g2, k1, f1, j), _sample(g3, k1, f1, j)
-        jlo, jhi = _interval(jlo, jhi, b1 + 3.0 * b2 * v1 * h,
-                             b3 * v1 * v1 * v1 + 3.0 * b2 * v1 * u, jerk[j])
-    for j in range(2):
-        if np.isfinite(wafer[j]):
-            ulo, uhi = _interval(ulo, uhi, _sample(w1, k, f, j), _sample(w2, k, f, j) * v * v,
-                                 wafer[j])
-    if np.isfinite(wafer[2]):
-        # |b + a u| <= L with a = w1, b = w2 v^2: a quadratic in u.
-        ax, ay = _sample(w1, k, f, 0), _sample(w1, k, f, 1)
-        bx, by = _sample(w2, k, f, 0) * v * v, _sample(w2, k, f, 1) * v * v
-        aa, ab, bb = ax * ax + ay * ay, ax * bx + ay * by, bx * bx + by * by
-        if aa > 1e-24:
-            disc = ab * ab - aa * (bb - wafer[2] * wafer[2])
-            if disc >= 0.0:
-                root = np.sqrt(disc)
-                ulo = max(ulo, (-ab - root) / aa)
-                uhi = min(uhi, (-ab + root) / aa)
-    return ulo, uhi, jlo, jhi
-
-
-@kernel(nogil=True)
-def _advance(s, v, u, j, h):
-    """Return (s, v, u) after ``h`` seconds of constant jerk j."""
-    return (s + h * (v + h * (u / 2.0 + h * j / 6.0)), v + h * (u + h * j / 2.0), u + h * j)
-
-
-@kernel(nogil=True)
-def _easing(v, u):
-    """Return the constant jerk that brings sigma' and sigma'' to zero together."""
-    if u >= 0.0:
-        return 0.0
-    if v <= 0.0:
-        return np.inf
-    return u * u / (2.0 * v)
-
-
-@kernel(nogil=True)
-def _eases(s0, ds, count, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, s, v, u):
-    """
-    Return whether easing off from (s, v, u) to rest keeps every limit.
-
-    Easing off holds the jerk ``_easing`` gives; checked at every ``step`` until rest as
-    the braking is (``_bounds``): sigma'' within the acceleration limits, the jerk within
-    the jerk limits at both ends of each step.
-    """
-    j = _easing(v, u)
-    if not (j > 0.0 and np.isfinite(j)):
-        return False
-    left = -u / j
-    while left > 0.0:
-        h = min(step, left)
-        ulo, uhi, jlo, jhi = _bounds(s0, ds, count, g1, g2, g3, w1, w2, acceleration, jerk,
-                                     wafer, s, v, u, h)
-        # Within rounding: a braking step held on a bound ends on it up to 1e-16.
-        du, dj = TOLERANCE * (1.0 + abs(u)), TOLERANCE * (1.0 + abs(j))
-        if np.isnan(ulo) or not (u <= uhi + du and jlo - dj <= j <= jhi + dj):
-            return False
-        s, v, u = _advance(s, v, u, j, h)
-        left -= h
-    return True
-
-
-@kernel(nogil=True)
-def _brake(s0, ds, count, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, halvings,
-           starts, jerks, states):
-    """
-    Fill the stop's phases from (s0, 1, 0); return (phases, whether it came to rest).
-
-    Each step of ``step`` s brakes with the hardest jerk the jerk limits allow, held within
-    the deceleration the acceleration limits leave at the step's end, as long as easing off
-    from the step's end still keeps every limit (``_eases``); where it would not, the
-    hardest braking that does (halving); once none does, easing off begins where it
-    still did (braking on while it has not yet: at first, with no
-    deceleration, there is nothing to ease off), its jerk constant, its last step as
-    long as it takes.
-    """
-    s, v, u = s0, 1.0, 0.0
-    t = 0.0
-    starts[0] = 0.0
-    states[0, 0], states[0, 1], states[0, 2] = s, v, u
-    n = 0
-    easing = False
-    eases = False  # whether easing off from the current state keeps every limit
-    while n < len(jerks):
-        h = step
-        if not easing:
-            ulo, uhi, jlo, jhi = _bounds(s0, ds, count, g1, g2, g3, w1, w2, acceleration,
-                                         jerk, wafer, s, v, u, step)
-            if np.isnan(ulo):
-                return n, False
-            # Brake: the hardest jerk, then held within the deceleration left at the end.
-            j = jlo
-            s1, v1, u1 = _advance(s, v, u, j, h)
-            lo1, hi1, _, _ = _bounds(s0, ds, count, g1, g2, g3, w1, w2, acceleration, jerk,
-                                     wafer, s1, v1, u, 0.0)
-            if not np.isnan(lo1):
-                j = min(max((min(max(u1, lo1), hi1, 0.0) - u) / h, jlo), jhi)
-            s1, v1, u1 = _advance(s, v, u, j, h)
-            later = v1 > 0.0 and _eases(s0, ds, count, g1, g2, g3, w1, w2, acceleration,
-                                        jerk, wafer, step, s1, v1, u1)
-            if eases and not later and v1 > 0.0:
-                # Brake less, as hard as still lets easing off keep every limit.
-                low, high = j, min(max(_easing(v, u), j), jhi)
-                for _ in range(halvings):
-                    middle = 0.5 * (low + high)
-                    s1, v1, u1 = _advance(s, v, u, middle, h)
-                    if v1 > 0.0 and _eases(s0, ds, count, g1, g2, g3, w1, w2, acceleration,
-                                           jerk, wafer, step, s1, v1, u1):
-                        high, later = middle, True
-                    else:
-                        low = middle
-                if later:
-                    j = high
-            easing = (eases and not later) or v1 <= 0.0
-            eases = later
-        if easing:
-            j = _easing(v, u)
-            if not (j > 0.0 and np.isfinite(j)):
-                # Rounding left it a hair from rest: it is there.
-                states[n, 1], states[n, 2] = 0.0, 0.0
-                return n, True
-            h = min(step, -u / j)
-            if _place(s0, ds, count, s)[0] < 0:
-                return n, False
-        s, v, u = _advance(s, v, u, j, h)
-        t += h
-        jerks[n] = j
-        n += 1
-        starts[n] = t
-        if easing and h < step:
-            v, u = 0.0, 0.0  # exactly at rest: what the last step reaches, up to rounding
-        states[n, 0], states[n, 1], states[n, 2] = s, v, u
-        if v <= 0.0 and u >= 0.0:
-            states[n, 1], states[n, 2] = 0.0, 0.0
-            return n, True
-    return n, False
+            states[:count + 1].copy()), int(status)

@@ -1,0 +1,114 @@
+"""Stop requests through the node: a published move stopped on its path, and bad requests."""
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from node_harness import values, wait_for
+import numpy as np
+from std_msgs.msg import String
+
+from wafer_planner_ros.planner import Planner
+
+
+def _trajectory(harness, request_id: str):
+    """Return (times, positions, velocities, accelerations) of a published trajectory."""
+    wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
+    msg = next(t for t in harness.trajectories if t.header.frame_id == request_id)
+    times = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
+                      for p in msg.points])
+    return (times, *(np.array([getattr(p, name) for p in msg.points])
+                     for name in ('positions', 'velocities', 'accelerations')))
+
+
+def test_a_published_move_stops_on_its_path_and_a_stop_stops_again(
+        harness, default_cell, default_roadmap):
+    harness.send_stations({'id': 'm1', 'from': 'loadport1', 'to': 'loadlock2'})
+    assert values(harness.result('m1'))['code'] == 'OK'
+    move = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
+    at = 0.3 * move.duration
+    harness.send_stop({'id': 's1', 'trajectory': 'm1', 'at': at})
+    result = harness.result('s1')
+    assert result.level == DiagnosticStatus.OK, result.message
+    got = values(result)
+    assert got['code'] == 'OK' and got['method'] == 'controlled-stop'
+    assert float(got['cycle_time']) < move.duration - at
+    times, q, qd, qdd = _trajectory(harness, 's1')
+    state = [x[0] for x in move.evaluate_orders([at], range(3))]
+    # It starts exactly in the published move's state there, and ends at rest.
+    assert np.array_equal(q[0], state[0])
+    assert np.abs(qd[0] - state[1]).max() <= 1e-9 and np.abs(qdd[0] - state[2]).max() <= 1e-9
+    assert np.abs(np.concatenate([qd[-1], qdd[-1]])).max() == 0.0
+    # Every configuration of the stop is one the move passes through (its path).
+    dense = move.evaluate(np.linspace(at, move.duration, 200001))
+    nearest = np.abs(dense[None, :, :] - q[::10, None, :]).max(axis=2).min(axis=1)
+    assert nearest.max() < 1e-4
+    # A stop of the stop: published and kept under its own id.
+    harness.send_stop({'id': 's2', 'trajectory': 's1', 'at': 0.5 * times[-1]})
+    assert values(harness.result('s2'))['code'] == 'OK'
+    _, q2, qd2, _ = _trajectory(harness, 's2')
+    assert np.linalg.norm(qd2[0]) > 0.0
+
+
+def test_bad_stop_requests_get_their_codes_and_the_node_serves_on(harness):
+    harness.send_stations({'id': 'm2', 'from': 'loadport2', 'to': 'loadlock1'})
+    duration = float(values(harness.result('m2'))['cycle_time'])
+    cases = {
+        'b1': ({'id': 'b1', 'trajectory': 'nothing', 'at': 0.5}, 'UNKNOWN_TRAJECTORY'),
+        'b2': ({'id': 'b2', 'trajectory': 'm2', 'at': duration + 1.0}, 'OUTSIDE_TRAJECTORY'),
+        'b3': ({'id': 'b3', 'trajectory': 'm2', 'at': -0.1}, 'OUTSIDE_TRAJECTORY'),
+        'b4': ({'id': 'b4', 'trajectory': 'm2', 'at': 0.0}, 'AT_REST'),
+        'b5': ({'id': 'b5', 'trajectory': 'm2', 'at': 'soon'}, 'INVALID_REQUEST'),
+        'b6': ({'id': 'b6', 'trajectory': 'm2'}, 'INVALID_REQUEST'),
+        'b7': ({'id': 'b7', 'trajectory': 'm2', 'at': 0.5, 'to': 'loadport1'},
+               'INVALID_REQUEST'),
+    }
+    for request, _ in cases.values():
+        harness.send_stop(request)
+    harness.stop_pub.publish(String(data='{"id": "b8", "at": 1e999, "trajectory": "m2"}'))
+    harness.stop_pub.publish(String(data='{"id": "b9", "trajectory": '))
+    cases['b8'] = (None, 'NOT_FINITE')
+    cases['b9'] = (None, 'INVALID_REQUEST')
+    for request_id, (_, code) in cases.items():
+        result = harness.result(request_id)
+        assert values(result)['code'] == code, (request_id, result.message)
+        assert sum(r.name == request_id for r in harness.results) == 1
+    harness.send_stop({'id': 'after', 'trajectory': 'm2', 'at': 0.5 * duration})
+    assert values(harness.result('after'))['code'] == 'OK'
+
+
+def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys):
+    from std_srvs.srv import SetBool
+    from wafer_planner_ros.cli.common import run
+    from wafer_planner_ros.cli.replay import main as replay_main
+    from wafer_planner_ros.recording.queries import queries
+    from wafer_planner_ros.recording.reading import read
+    harness.send_stations({'id': 'm3', 'from': 'loadport3', 'to': 'loadlock1'})
+    duration = float(values(harness.result('m3'))['cycle_time'])
+    harness.send_stop({'id': 's3', 'trajectory': 'm3', 'at': 0.2 * duration})
+    harness.send_stop({'id': 's4', 'trajectory': 'unknown', 'at': 0.2})
+    for request_id in ('s3', 's4'):
+        harness.result(request_id)
+    assert harness.call('set_recording', SetBool.Request(data=False)).success
+    from pathlib import Path
+    bags = sorted(p for p in Path(harness.recordings).iterdir() if p.is_dir())
+    found = [q for bag in bags for q in queries(read(bag))]
+    stops = {q.request_id: q for q in found if q.kind == 'stop'}
+    assert {'s3', 's4'} <= set(stops) and stops['s3'].trajectory is not None
+    assert stops['s4'].code == 'UNKNOWN_TRAJECTORY'
+    code = run(replay_main, [str(bags[-1]), '--compare', '--cache-dir', str(roadmap_cache)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert ' 0 different' in out and 's3' in out, out
+
+
+def test_a_stop_is_stamped_when_it_starts(harness):
+    harness.send_stations({'id': 'm5', 'from': 'loadport1', 'to': 'loadlock1'})
+    duration = float(values(harness.result('m5'))['cycle_time'])
+    harness.send_stop({'id': 's5', 'trajectory': 'm5', 'at': 0.25 * duration})
+    assert values(harness.result('s5'))['code'] == 'OK'
+    wait_for(lambda: {'m5', 's5'} <= {t.header.frame_id for t in harness.trajectories}, 10)
+    move, stop = (next(t for t in harness.trajectories if t.header.frame_id == request_id)
+                  for request_id in ('m5', 's5'))
+
+    def ns(stamp):
+        return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+    assert ns(stop.header.stamp) - ns(move.header.stamp) == round(0.25 * duration * 1e9)

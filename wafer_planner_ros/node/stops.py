@@ -1,0 +1,149 @@
+"""
+The node's controlled stops: what it published, and stop requests answered at once.
+
+Every trajectory the node publishes under a request id is kept (the last ``KEPT``) with
+the planner that made it, so the limit set it keeps; a stop request
+(``service.requests.stop_request``) names one of them and a moment, and is answered on a
+thread of its own, never behind planning, with the controlled stop (``Planner.stop``): a
+trajectory that starts exactly in the published one's state at that moment and comes to
+rest on its path. The stop is published like any answer (its trajectory, then its
+``~/result``) under the stop request's id, stamped when it starts (the stopped trajectory's
+``header.stamp`` plus ``at``: a controller that replaces the rest of a trajectory from a
+new one's stamp, as ``joint_trajectory_controller`` does, splices it exactly there), and
+kept under that id too: a stop of a stop works. A trajectory not kept is
+``UNKNOWN_TRAJECTORY``; a moment outside it ``OUTSIDE_TRAJECTORY``, one where it rests
+``AT_REST``. Every stop request gets exactly
+one answer, whatever happens.
+"""
+
+from collections import deque, OrderedDict
+from dataclasses import dataclass
+import threading
+import time
+from typing import Callable
+
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.node import messages
+from wafer_planner_ros.node.faults import reason_of
+from wafer_planner_ros.node.messages import Sent
+from wafer_planner_ros.service.requests import Request
+
+KEPT = 256
+"""Published trajectories kept for stop requests (the oldest forgotten first)."""
+
+
+class Stops:
+    """The kept trajectories and the stop-answering thread (see the module's description)."""
+
+    def __init__(self, send: Callable, answer_error: Callable, answer_internal: Callable,
+                 logger):
+        """
+        Start the thread.
+
+        ``send(*items)`` hands messages to the executor; ``answer_error`` and
+        ``answer_internal`` are the worker's (one answer per query, counted there).
+        """
+        self._send, self._logger = send, logger
+        self._answer_error, self._answer_internal = answer_error, answer_internal
+        self._lock = threading.Condition()
+        self._kept = OrderedDict()
+        """request id -> (planner, result, roadmap) of the trajectories published."""
+        self._waiting = deque()
+        self._stopping = False
+        self._thread = threading.Thread(target=self._work, name='wafer_planner_stop',
+                                        daemon=True)
+        self._thread.start()
+
+    def keep(self, request_id: str, planner, result, roadmap, stamp) -> None:
+        """
+        Keep a published answer for stop requests (an answer without an id is not).
+
+        ``stamp``: its ``header.stamp``, when it starts (a stop of it starts ``at`` later).
+        """
+        if not request_id:
+            return
+        with self._lock:
+            self._kept.pop(request_id, None)
+            self._kept[request_id] = (planner, result, roadmap, stamp)
+            while len(self._kept) > KEPT:
+                self._kept.popitem(last=False)
+
+    def enqueue(self, number: int, request, received: float) -> None:
+        """Queue a stop request (``service.requests.StopRequest``) received at ``received``."""
+        with self._lock:
+            self._waiting.append((number, request, received))
+            self._lock.notify()
+
+    def stop(self) -> None:
+        """Have the thread end once idle."""
+        with self._lock:
+            self._stopping = True
+            self._lock.notify()
+
+    def join(self, timeout: float) -> None:
+        """Wait up to ``timeout`` seconds for the thread."""
+        self._thread.join(timeout)
+
+    def _work(self) -> None:
+        """Answer the stop requests one at a time until stopped."""
+        while True:
+            with self._lock:
+                while not self._waiting and not self._stopping:
+                    self._lock.wait()
+                if self._stopping:
+                    return
+                number, request, received = self._waiting.popleft()
+                kept = self._kept.get(request.trajectory)
+            try:
+                self._answer(number, request, received, kept)
+            except Exception as exc:  # noqa: B902 - the thread outlives any one request
+                self._logger.error(f'stop thread: {reason_of(exc)}')
+
+    def _answer(self, number: int, request, received: float, kept) -> None:
+        """Answer one stop request (its one answer, whatever happens)."""
+        label = f'{request.trajectory} at {request.at:.6g} s'
+        if kept is None:
+            self._answer_error(number, request.request_id, ErrorCode.UNKNOWN_TRAJECTORY,
+                               f'no trajectory {request.trajectory!r} published by this node '
+                               f'(it keeps the last {KEPT})', label, 'rest')
+            return
+        planner, result, roadmap, stamp = kept
+        begun = time.monotonic()
+        try:
+            stopped = planner.stop(result.trajectory, request.at, request.trajectory,
+                                   result.load)
+        except PlanningError as exc:
+            self._answer_error(number, request.request_id, exc.code, exc.message, label,
+                               'rest', (time.monotonic() - begun) * 1e3, roadmap)
+            return
+        except Exception as exc:  # noqa: B902 - every request gets its one answer
+            self._answer_internal(number, request.request_id, exc, 'stopping', label, 'rest',
+                                  (time.monotonic() - begun) * 1e3, roadmap)
+            return
+        try:
+            # Stamped when it starts: ``at`` after the trajectory it stops (a controller
+            # replaces the rest of that one from there).
+            starts = later(stamp, request.at)
+            answer = messages.plan_answer(
+                stopped, Request(request.request_id, label, 'rest'), roadmap,
+                planner.cell.robot.joint_names, starts, (time.monotonic() - received) * 1e3)
+        except Exception as exc:  # noqa: B902 - every request gets its one answer
+            self._answer_internal(number, request.request_id, exc, 'answering', label, 'rest',
+                                  None, roadmap)
+            return
+        self._send((Sent.ANSWER, answer, number))
+        self.keep(request.request_id, planner, stopped, roadmap, starts)
+
+
+def later(stamp, seconds: float) -> 'Stamp':
+    """Return a ROS time (anything with ``sec`` and ``nanosec``) ``seconds`` later."""
+    total = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec) + round(seconds * 1e9)
+    return Stamp(total // 1_000_000_000, total % 1_000_000_000)
+
+
+@dataclass(frozen=True)
+class Stamp:
+    """A ROS time: whole seconds and nanoseconds."""
+
+    sec: int
+    nanosec: int
