@@ -1,0 +1,126 @@
+"""
+A stop executed: the node and the simulated arm, a loaded move stopped while the arm moves.
+
+The arm (``wafer-sim``) executes the node's trajectories as ``joint_trajectory_controller``
+does; the stop, stamped where it starts, replaces the rest of the move there. What the arm
+did is read back from ``/joint_states`` (100 Hz).
+"""
+
+import time
+
+from node_harness import values, wait_for
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+from wafer_planner_ros.planner import Planner
+
+START = 'loadport1'
+GOAL = 'loadlock2'
+LEAD = 0.4
+"""s between sending a stop request and the moment it stops at (the answer comes first)."""
+
+
+@pytest.fixture(scope='module')
+def arm_and_node(roadmap_cache, tmp_path_factory):
+    """Yield the node and the simulated arm on one executor, the arm at ``START``."""
+    from node_harness import Harness, isolate_dds
+    from wafer_planner_ros.node.sim import SimulatedArm
+    isolate_dds(tmp_path_factory.mktemp('dds'))
+
+    def arm(context):
+        return SimulatedArm(context=context, parameter_overrides=[
+            Parameter('initial_station', value=START)])
+
+    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0,
+                       'recording.directory': str(tmp_path_factory.mktemp('recordings'))},
+                      beside=[arm])
+    from sensor_msgs.msg import JointState
+    running.joint_states = []
+    running.peer.create_subscription(JointState, '/joint_states', running.joint_states.append,
+                                     1000)
+    wait_for(lambda: running.joint_states, 20.0)
+    yield running
+    running.close()
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+@pytest.mark.parametrize('share', [0.15, 0.3])
+def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
+        arm_and_node, default_cell, default_roadmap, share):
+    harness = arm_and_node
+    robot = default_cell.robot
+    request_id = f'go-{share}'
+    # Back to the start first (the previous case stopped the arm somewhere on its way).
+    here = np.array(harness.joint_states[-1].position)
+    if np.abs(here - default_cell.stations[START].configs[0].q).max() > 1e-9:
+        harness.send_stations({'id': f'back-{share}', 'from': here.tolist(), 'to': START})
+        assert values(harness.result(f'back-{share}'))['code'] == 'OK'
+        wait_for(lambda: not np.any(harness.joint_states[-1].velocity) and np.abs(
+            np.array(harness.joint_states[-1].position)
+            - default_cell.stations[START].configs[0].q).max() < 1e-9, 30.0)
+    harness.send_stations({'id': request_id, 'from': START, 'to': GOAL})
+    assert values(harness.result(request_id))['code'] == 'OK'
+    wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
+    sent = next(t for t in harness.trajectories if t.header.frame_id == request_id)
+    began = _seconds(sent.header.stamp)
+    move = Planner(default_cell, default_roadmap).plan(START, GOAL).trajectory
+    assert float(values(harness.result(request_id))['cycle_time']) == move.duration
+    at = max(share * move.duration, time.time() - began + LEAD)
+    wait_for(lambda: time.time() >= began + at - LEAD, 10.0)
+    harness.send_stop({'id': f'stop-{share}', 'trajectory': request_id, 'at': at})
+    result = harness.result(f'stop-{share}')
+    assert values(result)['code'] == 'OK', result.message
+    received = time.time()
+    assert received < began + at, 'the stop came after the moment it stops at'
+    stop_time = float(values(result)['cycle_time'])
+    wait_for(lambda: _seconds(harness.joint_states[-1].header.stamp) > began + at + stop_time
+             + 0.1, 20.0)
+    executed = [m for m in harness.joint_states
+                if began - 0.05 <= _seconds(m.header.stamp) <= began + at + stop_time + 0.1]
+    t = np.array([_seconds(m.header.stamp) for m in executed]) - began
+    q = np.array([m.position for m in executed])
+    qd = np.array([m.velocity for m in executed])
+    # Continuous across the splice at ``at``: no jump in position or velocity (each step
+    # within what the limits allow over the time between two states), and the acceleration
+    # from the velocities continuous there too. (From its own start on: a move the arm
+    # receives after its stamp is picked up where it should be by then, as a controller
+    # does, which is the node's stamping of moves, not the stop.)
+    limits = robot.limit_set.joints
+    near = t >= at - 0.1
+    dt = np.diff(t[near])[:, None]
+    assert np.all(np.abs(np.diff(q[near], axis=0)) <= limits.velocity * dt * (1 + 1e-6) + 1e-9)
+    qdd = np.diff(qd[near], axis=0) / dt
+    assert np.all(np.abs(qdd) <= limits.acceleration * (1 + 1e-3))
+    # Each acceleration is the average over its step: two averages differ by at most the
+    # jerk limit times the time between the steps' middles.
+    middles = 0.5 * (t[near][1:] + t[near][:-1])
+    around = np.abs(middles - at) < 0.05
+    assert around.sum() >= 3
+    jumps = np.abs(np.diff(qdd[around], axis=0)) / np.diff(middles[around])[:, None]
+    assert np.all(jumps <= limits.jerk * (1 + 1e-3))
+    # Within every limit: velocities, accelerations (from the velocities), the wafer's.
+    assert np.all(np.abs(qd) <= limits.velocity * (1 + 1e-9))
+    # While it stops, the arm follows the stop the core makes of the same move there, a
+    # curve that keeps every limit (checked densely, and independently, in
+    # test/trajectory/test_stopping.py), to within the controller's quintic between its
+    # 10 ms samples (less than the jerk limit times a step cubed).
+    planner = Planner(default_cell, default_roadmap)
+    stop = planner.stop(move, at, request_id)
+    assert stop.verification.ok and max(stop.verification.ratios.values()) <= 1.0
+    assert stop.cycle_time == stop_time
+    stopping = (t >= at) & (t <= at + stop_time)
+    assert stopping.sum() >= 0.5 * 100 * stop_time  # at 100 Hz, give or take a busy machine
+    curve = stop.trajectory.evaluate(t[stopping] - at)
+    assert np.abs(q[stopping] - curve).max() < limits.jerk.max() * 0.01 ** 3
+    # At rest on the move's path, short of the goal; before ``at``, the move itself.
+    assert not np.any(qd[-1]) and np.abs(q[-1] - move.evaluate([move.duration])[0]).max() > 0.01
+    dense = move.evaluate(np.linspace(0.0, move.duration, 40001))
+    assert np.abs(dense - q[-1]).max(axis=1).min() < 1e-3
+    # The controller's quintic between the 10 ms samples departs from the curve only where
+    # its jerk jumps between them: by less than the jerk limit times a step cubed.
+    before = (t > 0.25) & (t < at)  # once the arm follows it (it may come late: above)
+    assert np.abs(q[before] - move.evaluate(t[before])).max() < limits.jerk.max() * 0.01 ** 3
