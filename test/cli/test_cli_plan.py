@@ -16,6 +16,7 @@ from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.plotting import plot_trajectory
 from wafer_planner_ros.service.table import build_table, table_key
 from wafer_planner_ros.service.table_store import save_table, table_path
+from wafer_planner_ros.trajectory.stopping import hold_demand, hold_motion
 
 
 def _run(capsys, *argv):
@@ -267,3 +268,44 @@ def test_stop_at_stops_the_move_on_its_path_and_says_what_a_hold_would_demand(
     code, _, err = _run(capsys, '--all-pairs', '--stop-at', '1', '--cache-dir',
                         str(roadmap_cache))
     assert code == 2 and '--stop-at' in err
+
+
+def test_stop_at_with_plot_draws_the_move_and_the_stop_against_the_hold(
+        roadmap_cache, capsys, tmp_path):
+    png = tmp_path / 'move.png'
+    code, _, err = _run(capsys, 'loadport1', 'loadlock2', '--cache-dir', str(roadmap_cache),
+                        '--method', 'knot-timing', '--stop-at', '0.4', '--plot', str(png))
+    assert code == 0
+    stop = tmp_path / 'move_stop.png'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['move.png', 'move_stop.png']
+    for drawn in (png, stop):
+        assert drawn.read_bytes()[:4] == b'\x89PNG' and drawn.stat().st_size > 30_000
+        assert f'plot: {drawn}' in err
+
+
+def test_the_abrupt_hold_brakes_each_joint_alone_at_its_limit_and_peaks_at_hold_demand(
+        default_cell, default_roadmap):
+    robot = default_cell.robot
+    move = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
+    braking = robot.limit_set.joints.acceleration
+    for at in (0.4, 0.5 * move.duration):
+        t, q, qd, qdd = hold_motion(move, at, robot)
+        q0, v0 = (x[0] for x in move.evaluate_orders([at], (0, 1)))
+        assert t[0] == 0.0 and np.array_equal(q[0], q0) and np.array_equal(qd[0], v0)
+        rests = np.abs(v0) / braking
+        assert t[-1] == pytest.approx(rests.max(), rel=1e-12)
+        for j in range(3):
+            moving = t < rests[j]
+            # Exactly at its limit against its motion until it rests, then still.
+            assert np.all(qdd[moving, j] == -np.sign(v0[j]) * braking[j])
+            assert np.all(qdd[~moving, j] == 0.0)
+            assert np.allclose(np.abs(qd[moving, j]), np.abs(v0[j]) - braking[j] * t[moving],
+                               rtol=0, atol=1e-12)
+            assert np.abs(qd[~moving, j]).max(initial=0.0) <= 1e-12
+        assert np.abs(qd[-1]).max() <= 1e-12
+        # Positions: the speeds integrated (exact but in the step where a joint comes to rest).
+        steps = 0.5 * (qd[1:] + qd[:-1]) * np.diff(t)[:, None]
+        assert np.allclose(q[1:], q0 + np.cumsum(steps, axis=0), rtol=0, atol=1e-6)
+        wafer = robot.arm.wafer_acceleration(q, qd, qdd)
+        assert float(np.abs(wafer).max()) == hold_demand(move, at, robot)
+        assert hold_demand(move, at, robot) > 2.0 * robot.limit_set.wafer.xy.max()

@@ -150,7 +150,8 @@ def main(argv=None) -> int:
                         'stop on its own path, under every limit (the wafer limit and the '
                         'jerk limit included), as the node answers ~/stop_request')
     parser.add_argument('--json', metavar='PATH|-', help='write the result(s) as JSON')
-    parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits')
+    parser.add_argument('--plot', metavar='PNG', help='draw the motion and its limits (with '
+                        '--stop-at, the stop against an abrupt hold too, at <stem>_stop.png)')
     args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
     if args.all_pairs and args.cycle:
         raise UsageError('give --all-pairs or --cycle, not both')
@@ -193,7 +194,7 @@ def main(argv=None) -> int:
     if args.json != '-':
         print(table(rows) if args.all_pairs else '\n'.join(_summary(row) for row in rows))
     if args.plot:
-        _plot(cell, results, rows, Path(args.plot))
+        _plot(cell, results, rows, Path(args.plot), args.stop_at)
     return EXIT_OK if all(r['status'] == 'ok' for r in rows) else EXIT_FAILURE
 
 
@@ -283,8 +284,26 @@ def _summary(row: dict) -> str:
             + ', '.join(f'{k} {v:.1f}' for k, v in row['timings_ms'].items() if k != 'total'))
 
 
-def _plot(cell, results, rows, path: Path) -> None:
+def _plot(cell, results, rows, path: Path, stop_at=None) -> None:
+    """
+    Draw each move's figure (one PNG per pair beside ``path`` when there are several).
+
+    With ``stop_at``: the move's at ``path`` and, when it was stopped, the stop against the
+    abrupt hold at ``<stem>_stop<suffix>`` (``plotting_stop.plot_stop``).
+    """
     from wafer_planner_ros.plotting import plot_trajectory
+    if stop_at is not None:
+        move, stop = (results + [None])[:2]
+        if move is not None:
+            plot_trajectory(cell, move, path)
+            print(f'plot: {path}', file=sys.stderr)
+        if stop is not None:
+            from wafer_planner_ros.plotting_stop import plot_stop
+            target = path.with_name(f'{path.stem}_stop{path.suffix}')
+            plot_stop(cell, move, stop, stop_at, target)
+            print(f'plot: {target} (the stop at {stop_at:g} s against an abrupt hold)',
+                  file=sys.stderr)
+        return
     done = [(r, row) for r, row in zip(results, rows) if r is not None]
     for result, row in done:
         target = path if len(rows) == 1 else path.with_name(

@@ -185,10 +185,20 @@ def hold_demand(trajectory: Trajectory, at: float, robot, samples: int = 2001) -
     """
     Return the peak wafer acceleration (m/s^2) of an abrupt hold of ``trajectory`` at ``at``.
 
-    The hold a controller makes without a planner: each joint braked on its own at its
-    acceleration limit to rest, off the path and with no jerk limit (as
-    ``joint_trajectory_controller`` stops on a cancel); its wafer acceleration from the
-    first instant on, sampled until the last joint rests.
+    The hold a controller makes without a planner (``hold_motion``): its wafer acceleration
+    on x and y from the first instant on, sampled until the last joint rests.
+    """
+    _, q, qd, qdd = hold_motion(trajectory, at, robot, samples)
+    return float(np.abs(robot.arm.wafer_acceleration(q, qd, qdd)).max())
+
+
+def hold_motion(trajectory: Trajectory, at: float, robot, samples: int = 2001) -> tuple:
+    """
+    Return (t (N,), q, qd, qdd (N, J)): an abrupt hold of ``trajectory`` from ``at``.
+
+    Each joint braked on its own at its acceleration limit to rest, off the path and with
+    no jerk limit (as ``joint_trajectory_controller`` stops on a cancel); ``samples``
+    instants from ``at`` (t = 0) until the last joint rests (t = the hold's duration).
     """
     q0, v0, _ = (x[0] for x in trajectory.evaluate_orders([float(at)], (0, 1, 2)))
     braking = np.asarray(robot.limit_set.joints.acceleration, float)
@@ -200,7 +210,7 @@ def hold_demand(trajectory: Trajectory, at: float, robot, samples: int = 2001) -
     tau = np.minimum(t, rests)
     qd = v0 - sign * braking * tau
     q = q0 + v0 * tau - 0.5 * sign * braking * tau ** 2
-    return float(np.abs(robot.arm.wafer_acceleration(q, qd, qdd)).max())
+    return t[:, 0], q, qd, qdd
 
 
 def _path(trajectory: Trajectory, arm, begin: float, end: float) -> tuple:
