@@ -84,8 +84,11 @@ def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys)
     duration = float(values(harness.result('m3'))['cycle_time'])
     harness.send_stop({'id': 's3', 'trajectory': 'm3', 'at': 0.2 * duration})
     harness.send_stop({'id': 's4', 'trajectory': 'unknown', 'at': 0.2})
-    for request_id in ('s3', 's4'):
+    harness.send_stations({'id': 'd4', 'from': {'trajectory': 'm3', 'at': 0.3 * duration},
+                           'to': 'loadport1'})
+    for request_id in ('s3', 's4', 'd4'):
         harness.result(request_id)
+    assert values(harness.result('d4'))['code'] == 'OK'
     assert harness.call('set_recording', SetBool.Request(data=False)).success
     from pathlib import Path
     bags = sorted(p for p in Path(harness.recordings).iterdir() if p.is_dir())
@@ -96,7 +99,8 @@ def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys)
     code = run(replay_main, [str(bags[-1]), '--compare', '--cache-dir', str(roadmap_cache)])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert ' 0 different' in out and 's3' in out, out
+    assert ' 0 different' in out and 's3' in out and 'd4' in out, out
+    assert '0 not compared' in out, out
 
 
 def test_a_stop_is_stamped_when_it_starts(harness):
@@ -112,3 +116,34 @@ def test_a_stop_is_stamped_when_it_starts(harness):
         return stamp.sec * 1_000_000_000 + stamp.nanosec
 
     assert ns(stop.header.stamp) - ns(move.header.stamp) == round(0.25 * duration * 1e9)
+
+
+def test_a_move_diverted_in_motion_starts_in_its_state_and_goes_to_the_new_goal(
+        harness, default_cell, default_roadmap):
+    harness.send_stations({'id': 'm6', 'from': 'loadport1', 'to': 'loadlock2'})
+    assert values(harness.result('m6'))['code'] == 'OK'
+    move = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
+    at = 0.3 * move.duration
+    harness.send_stations({'id': 'd1', 'from': {'trajectory': 'm6', 'at': at},
+                           'to': 'loadlock1'})
+    result = harness.result('d1')
+    assert result.level == DiagnosticStatus.OK, result.message
+    got = values(result)
+    assert got['method'] == 'stop-then-move' and got['to'] == 'loadlock1'
+    times, q, qd, qdd = _trajectory(harness, 'd1')
+    state = [x[0] for x in move.evaluate_orders([at], range(3))]
+    assert np.array_equal(q[0], state[0])
+    assert np.abs(qd[0] - state[1]).max() <= 1e-9 and np.abs(qdd[0] - state[2]).max() <= 1e-9
+    goal = next(c.q for c in default_cell.stations['loadlock1'].configs
+                if np.array_equal(c.q, q[-1]))
+    assert np.abs(np.concatenate([qd[-1], qdd[-1]])).max() <= 1e-9 and goal is not None
+    wait_for(lambda: {'m6', 'd1'} <= {t.header.frame_id for t in harness.trajectories}, 10)
+    sent = {t.header.frame_id: t.header.stamp for t in harness.trajectories}
+    assert (sent['d1'].sec - sent['m6'].sec) * 10 ** 9 + sent['d1'].nanosec \
+        - sent['m6'].nanosec == round(at * 1e9)
+    # A divert of a trajectory not published, or a "from" in motion that is no moment.
+    harness.send_stations({'id': 'd2', 'from': {'trajectory': 'nothing', 'at': 0.1},
+                           'to': 'loadlock1'})
+    harness.send_stations({'id': 'd3', 'from': {'trajectory': 'm6'}, 'to': 'loadlock1'})
+    assert values(harness.result('d2'))['code'] == 'UNKNOWN_TRAJECTORY'
+    assert values(harness.result('d3'))['code'] == 'INVALID_REQUEST'

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.errors import ErrorCode
+from wafer_planner_ros.service.bounded_json import quote
 from wafer_planner_ros.service.requests import (end_label, end_of_text, joint_request,
-                                                MAX_ID, quote, RequestError, station_request,
+                                                MAX_ID, RequestError, station_request,
                                                 with_negative_ends)
 
 JOINTS = ('joint_1', 'joint_2', 'joint_3')
@@ -198,3 +199,36 @@ def test_negative_joint_angles_stay_positional_and_read_as_angles():
     marked = with_negative_ends(argv)
     assert marked == [' -2.43,-1.58,-0.70'] + argv[1:]  # only the joint angles change
     assert end_of_text(marked[0]) == [-2.43, -1.58, -0.70]
+
+
+class _Point:
+    def __init__(self, positions, velocities=(), accelerations=()):
+        self.positions, self.velocities, self.accelerations = positions, velocities, accelerations
+
+
+class _Header:
+    frame_id = 'm1'
+
+
+class _Message:
+    header = _Header()
+    joint_names = []
+
+    def __init__(self, *points):
+        self.points = list(points)
+
+
+def test_a_joint_request_starting_in_motion_is_refused_not_planned_from_rest():
+    from wafer_planner_ros.errors import ErrorCode
+    from wafer_planner_ros.service.requests import request_of, RequestError
+    joints = ('shoulder', 'elbow', 'wrist')
+    goal = _Point([0.2, 0.3, 0.4])
+    start = _Point([0.1, 0.2, 0.3], [0.0] * 3, [0.0] * 3)
+    at_rest = request_of('joint', _Message(start, goal), joints)
+    assert at_rest.request_id == 'm1'
+    for moving in (_Point([0.1, 0.2, 0.3], [0.0, 0.5, 0.0]),
+                   _Point([0.1, 0.2, 0.3], [], [0.0, 0.0, -1.0])):
+        with pytest.raises(RequestError) as raised:
+            request_of('joint', _Message(moving, goal), joints)
+        assert raised.value.code is ErrorCode.INVALID_REQUEST
+        assert 'starts at rest' in raised.value.message and raised.value.request_id == 'm1'

@@ -127,3 +127,15 @@ def test_a_stop_verified_as_starting_at_rest_or_in_another_motion_fails(planner,
     qd, qdd = (x[0] for x in move.evaluate_orders([0.5 * move.duration], (1, 2)))
     assert not verify(curve, planner.cell, q, end, moving=(qd * 1.001, qdd)).ok
     assert verify(curve, planner.cell, q, end, moving=(qd, qdd)).ok
+
+
+@pytest.mark.parametrize('pair', [('loadport3', 'loadlock1'), ('loadlock2', 'loadport1')])
+def test_a_stop_that_follows_the_move_first_starts_exactly_in_its_state(planner, pair):
+    # At these moments no braking at once keeps the limits: the stop follows the move a
+    # little first (its start computed from the moment itself, not back from the braking).
+    move = planner.plan(*pair).trajectory
+    at = 5.0 * move.duration / 11.0
+    stop = planner.stop(move, at, 'r1')
+    assert stop.verification.ok and stop.metrics['timing'] == 'braked'
+    assert stop.trajectory.timing.jerks[0] == 0.0  # following the move
+    assert np.array_equal(stop.positions[0], move.evaluate([at])[0])

@@ -23,13 +23,14 @@ from wafer_planner_ros.cli.common import (EXIT_FAILURE, EXIT_OK, Progress, recor
                                           run, UsageError, write_json)
 from wafer_planner_ros.errors import CellError, ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.planner.stop import DIVERT as DIVERT_METHOD, METHOD as STOP_METHOD
 from wafer_planner_ros.recording.compare import (DEFAULT_TOLERANCE, judge, OK, row_for,
                                                  summary, table)
 from wafer_planner_ros.recording.queries import NODE_ONLY_CODES, Query
 from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.planning import PlanningService, within_budget
-from wafer_planner_ros.service.requests import request_of, RequestError, stop_request
+from wafer_planner_ros.service.requests import Moving, request_of, RequestError, stop_request
 
 
 class Replayer:
@@ -55,7 +56,10 @@ class Replayer:
         load = query.load
         period = float(query.parameters.get('trajectory.sample_period', 0.01))
         values = query.result.values if query.result is not None else {}
-        method = PlannerSettings(method=values.get('method') or PlannerSettings.method).method
+        named = values.get('method')
+        if named in (STOP_METHOD, DIVERT_METHOD):  # a stop's or a divert's: not a curve's
+            named = None
+        method = PlannerSettings(method=named or PlannerSettings.method).method
         key = (load.cell_text, load.values.get('roadmap_nodes'),
                load.values.get('roadmap_seed'))
         if key not in self._planners:
@@ -114,12 +118,25 @@ class Replayer:
                 return '', None
             planner = self.planner(query)
             request = request_of(query.kind, query.request, planner.cell.robot.joint_names)
-            result = PlanningService(planner).answer(request.start, request.goal,
-                                                     load=request.load)
+            if isinstance(request.start, Moving):  # a move left in motion: as a stop is
+                kept = self._answers.get(request.start.trajectory)
+                if kept is None:
+                    return self._unknown(request.start.trajectory)
+                result = planner.divert(kept[1].trajectory, request.start.at, request.goal,
+                                        request.start.trajectory, request.load)
+            else:
+                result = PlanningService(planner).answer(request.start, request.goal,
+                                                         load=request.load)
         except (RequestError, PlanningError) as exc:
             return exc.code.value, None
         self._answers[request.request_id] = (planner, result)
         return OK, result.cycle_time
+
+    def _unknown(self, trajectory: str) -> Tuple[str, Optional[float]]:
+        """Return the replay of a query naming a trajectory not replayed: as the node did."""
+        if trajectory in self._unreplayed:
+            return '', None
+        return ErrorCode.UNKNOWN_TRAJECTORY.value, None
 
     def _stop(self, query: Query) -> Tuple[str, Optional[float]]:
         """
@@ -134,9 +151,7 @@ class Replayer:
             return exc.code.value, None
         kept = self._answers.get(request.trajectory)
         if kept is None:
-            if request.trajectory in self._unreplayed:
-                return '', None
-            return ErrorCode.UNKNOWN_TRAJECTORY.value, None
+            return self._unknown(request.trajectory)
         planner, move = kept
         try:
             stopped = planner.stop(move.trajectory, request.at, request.trajectory,

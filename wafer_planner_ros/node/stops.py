@@ -13,7 +13,9 @@ new one's stamp, as ``joint_trajectory_controller`` does, splices it exactly the
 kept under that id too: a stop of a stop works. A trajectory not kept is
 ``UNKNOWN_TRAJECTORY``; a moment outside it ``OUTSIDE_TRAJECTORY``, one where it rests
 ``AT_REST``. Every stop request gets exactly
-one answer, whatever happens.
+one answer, whatever happens. A plan request may start in motion too (``"from":
+{"trajectory": ..., "at": ...}``): ``divert`` plans it from a kept trajectory, on the
+planning thread like any plan.
 """
 
 from collections import deque, OrderedDict
@@ -67,6 +69,26 @@ class Stops:
             self._kept[request_id] = (planner, result, roadmap, stamp)
             while len(self._kept) > KEPT:
                 self._kept.popitem(last=False)
+
+    def divert(self, planner, request, deadline: float, budget: float) -> tuple:
+        """
+        Return (answer, stamp) of a plan request whose start is in motion (``Moving``).
+
+        The move leaves the kept trajectory it names at its moment (``Planner.divert``),
+        planned on ``planner`` within ``budget`` s; stamped when it starts, as a stop is.
+        Raise PlanningError: ``UNKNOWN_TRAJECTORY`` for a trajectory not kept, else as
+        ``Planner.divert`` does.
+        """
+        moving = request.start
+        with self._lock:
+            kept = self._kept.get(moving.trajectory)
+        if kept is None:
+            raise PlanningError(ErrorCode.UNKNOWN_TRAJECTORY,
+                                f'no trajectory {moving.trajectory!r} published by this node '
+                                f'(it keeps the last {KEPT})')
+        result, stamp = kept[1], kept[3]
+        return planner.divert(result.trajectory, moving.at, request.goal, moving.trajectory,
+                              request.load, deadline, budget or None), later(stamp, moving.at)
 
     def enqueue(self, number: int, request, received: float) -> None:
         """Queue a stop request (``service.requests.StopRequest``) received at ``received``."""

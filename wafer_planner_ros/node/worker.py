@@ -36,6 +36,7 @@ from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.serving import Serving, table_counts
 from wafer_planner_ros.node.stops import Stops
+from wafer_planner_ros.service.requests import Moving
 from wafer_planner_ros.service.settings import NodeSettings
 
 PREVIOUS_KEPT_NS = 1_000_000_000
@@ -333,12 +334,17 @@ class PlanningWorker:
                 return
             begun = time.monotonic()
             try:
-                result = service.answer(request.start, request.goal, deadline, request.load)
+                if isinstance(request.start, Moving):
+                    result, stamp = self.stops.divert(service.planner, request, deadline,
+                                                      settings.optimise_budget)
+                else:
+                    result, stamp = service.answer(request.start, request.goal, deadline,
+                                                   request.load), None
             except PlanningError as exc:
                 self._answer_error(number, request, exc.code, exc.message,
                                    (time.monotonic() - begun) * 1000.0, roadmap)
                 return
-            doing, stamp = 'answering', self._stamp()
+            doing, stamp = 'answering', stamp or self._stamp()
             # The trajectory and its result go together (the node records both, then
             # publishes them); the markers, for people, after both.
             answer = messages.plan_answer(result, request, roadmap, joints, stamp,

@@ -23,7 +23,7 @@ from wafer_planner_ros.planner.endpoints import Endpoint, endpoint, only_branch
 from wafer_planner_ros.planner.legs import leg_key, Legs
 from wafer_planner_ros.planner.result import PlanResult
 from wafer_planner_ros.planner.settings import PlannerSettings
-from wafer_planner_ros.planner.stop import stop
+from wafer_planner_ros.planner.stop import divert, stop
 from wafer_planner_ros.planner.through import through
 from wafer_planner_ros.trajectory.methods import CurveMethod
 
@@ -129,6 +129,27 @@ class Planner:
         if load is not None and load != self.load:
             return self.for_load(load).stop(trajectory, at, label)
         return stop(self, trajectory, at, label)
+
+    def divert(self, trajectory, at: float, goal, label: str = 'the move',
+               load: Optional[str] = None, deadline: Optional[float] = None,
+               budget: Optional[float] = None) -> PlanResult:
+        """
+        Return the move from ``trajectory`` at ``at`` s to ``goal``, starting in motion.
+
+        For now its controlled stop then the move from rest to ``goal``, as one verified
+        trajectory (``stop.divert``). ``load``, ``deadline``, ``budget`` as for ``plan``.
+        """
+        if load is not None and load != self.load:
+            return self.for_load(load).divert(trajectory, at, goal, label, None, deadline,
+                                              budget)
+        return divert(self, trajectory, at, goal, label, deadline,
+                      None if budget is None else time.monotonic() + budget)
+
+    def planned(self, start, goal, deadline: Optional[float] = None,
+                until: Optional[float] = None) -> PlanResult:
+        """Return ``plan``'s answer with ``until`` a ``time.monotonic()`` instant."""
+        begun = time.perf_counter()
+        return self._planned(*self._ends_of(start, goal, None), deadline, until, begun)
 
     def transfer(self, start: Endpoint, goal: Endpoint, deadline: Optional[float],
                  until: Optional[float] = None) -> PlanResult:

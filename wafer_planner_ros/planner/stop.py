@@ -1,10 +1,14 @@
 """
-A controlled stop of a published move, answered like any request (``trajectory.stopping``).
+A controlled stop of a published move, and a move diverted from one, answered like any request.
 
 ``stop(planner, trajectory, at, label)`` brings ``trajectory`` to rest from ``at`` seconds
-after its start, on its own path, as fast as the planner's limit set allows; the answer
-starts exactly in the curve's state there (its velocity and acceleration included) and is
-verified as every answer is, that start motion with it.
+after its start, on its own path, as fast as the planner's limit set allows
+(``trajectory.stopping``); the answer starts exactly in the curve's state there (its
+velocity and acceleration included) and is verified as every answer is, that start motion
+with it. ``divert(planner, trajectory, at, goal, label)`` leaves the move at ``at`` for a
+new goal: for now always its controlled stop, then the move from rest where it stops to
+the goal, as one trajectory (``chained.Chained``), verified whole; its ``metrics`` say so
+(``divert``: ``'stop-then-move'``).
 """
 
 import time
@@ -12,11 +16,14 @@ import time
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner.endpoints import Endpoint
 from wafer_planner_ros.planner.result import answer, PlanResult
+from wafer_planner_ros.trajectory.chained import Chained
 from wafer_planner_ros.trajectory.stopping import controlled_stop, moving_state
 from wafer_planner_ros.trajectory.verify import verify
 
 METHOD = 'controlled-stop'
 """The method a stop's answer names."""
+DIVERT = 'stop-then-move'
+"""The method a diverted move's answer names: its stop, then the move from rest."""
 
 
 def stop(planner, trajectory, at: float, label: str) -> PlanResult:
@@ -47,5 +54,39 @@ def stop(planner, trajectory, at: float, label: str) -> PlanResult:
                                                    'timing': made.timing},
                   0, method=METHOD,
                   timings_ms={'stop': 1e3 * (checked - begun),
+                              'verify': 1e3 * (done - checked),
+                              'total': 1e3 * (done - begun)})
+
+
+def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
+           until=None) -> PlanResult:
+    """
+    Return the verified move from ``trajectory`` at ``at`` to ``goal`` (the module).
+
+    ``goal``: a station name or joint angles; ``deadline`` and ``until`` as for the
+    planner's moves from rest. Raise PlanningError as ``stop`` and the move to the goal do.
+    """
+    begun = time.perf_counter()
+    halted = stop(planner, trajectory, at, label)
+    rested = halted.goal_q
+    onward = planner.planned(rested, goal, deadline, until)
+    curve = Chained([halted.trajectory, onward.trajectory])
+    q, qd, qdd = (x[0] for x in trajectory.evaluate_orders([float(at)], (0, 1, 2)))
+    checked = time.perf_counter()
+    verification = verify(curve, planner.cell, q, onward.goal_q, moving=(qd, qdd))
+    if not verification.ok:
+        raise PlanningError(ErrorCode.VERIFICATION_FAILED,
+                            f'the move from {label} at {at:.6g} s to {onward.goal.label} '
+                            'failed its verification: ' + '; '.join(verification.problems))
+    done = time.perf_counter()
+    start = Endpoint(f'{label} at {at:.6g} s', ((None, q),))
+    timings = {f'onward.{k}': v for k, v in onward.timings_ms.items() if k != 'total'}
+    return answer(planner, start, onward.goal, q, onward.goal_q,
+                  (None, onward.branches[1]), curve, curve.duration, verification,
+                  onward.roadmap_path, onward.path,
+                  {'diverted_at': float(at), 'divert': 'stop-then-move',
+                   'stop_time': halted.cycle_time, 'onward_time': onward.cycle_time},
+                  onward.metrics.get('control_points', 0), method=DIVERT,
+                  timings_ms={'stop': halted.timings_ms['total'], **timings,
                               'verify': 1e3 * (done - checked),
                               'total': 1e3 * (done - begun)})

@@ -16,7 +16,6 @@ values themselves (limits, collision, known station).
 
 from dataclasses import dataclass
 import json
-import math
 import re
 from typing import Optional, Sequence, Tuple, Union
 
@@ -24,6 +23,7 @@ import numpy as np
 
 from wafer_planner_ros.cell.limits import LOADED, LOADS
 from wafer_planner_ros.errors import ErrorCode
+from wafer_planner_ros.service.bounded_json import JsonObject, loads, NotFinite, QUOTE, quote
 
 MAX_TEXT = 65536
 """Longest station request (characters) read."""
@@ -31,8 +31,6 @@ MAX_ID = 256
 """Longest request id (characters)."""
 MAX_NAME = 256
 """Longest station name (characters) read."""
-QUOTE = 200
-"""Most characters of a request's value that an error message quotes."""
 KEYS = ('id', 'from', 'to', 'load')
 """The keys of a station request (``load`` optional)."""
 STOP_KEYS = ('id', 'trajectory', 'at')
@@ -41,7 +39,23 @@ LEADING_ID = re.compile(r'\s*\{\s*"id"\s*:\s*("(?:[^"\\\x00-\x1f]|\\.){1,%d}")' 
 """A request text's id when it is the first key, read without reading the rest: its string
 literal (each character, or escape, of at most ``MAX_ID``)."""
 
-End = Union[str, np.ndarray]
+
+@dataclass(frozen=True)
+class Moving:
+    """A start in motion: a published trajectory at a moment (``"from": {...}``)."""
+
+    trajectory: str
+    """The id of the trajectory the robot follows (the request id it was published under)."""
+    at: float
+    """s after that trajectory's start."""
+
+    @property
+    def label(self) -> str:
+        """Return the start as a label."""
+        return f'{self.trajectory} at {self.at:.6g} s'
+
+
+End = Union[str, np.ndarray, Moving]
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,6 +97,8 @@ def end_label(end: Optional[End]) -> str:
         return ''
     if isinstance(end, str):
         return end
+    if isinstance(end, Moving):
+        return end.label
     return json.dumps(np.asarray(end, float).reshape(-1).tolist())
 
 
@@ -98,7 +114,9 @@ def request_of(kind: str, message, robot_joints: Sequence[str]) -> Request:
     if kind == 'station':
         return station_request(message.data, robot_joints)
     return joint_request(message.header.frame_id, message.joint_names,
-                         [point.positions for point in message.points], robot_joints)
+                         [point.positions for point in message.points], robot_joints,
+                         [(point.velocities, point.accelerations)
+                          for point in message.points[:1]])
 
 
 def request_id_of(value) -> str:
@@ -127,8 +145,16 @@ def leading_id(text: str) -> str:
 
 
 def joint_request(request_id: str, joint_names: Sequence[str],
-                  positions: Sequence[Sequence[float]], robot_joints: Sequence[str]) -> Request:
-    """Return the request of a JointTrajectory's id, joint names and points' positions."""
+                  positions: Sequence[Sequence[float]], robot_joints: Sequence[str],
+                  motion: Sequence[tuple] = ()) -> Request:
+    """
+    Return the request of a JointTrajectory's id, joint names and points' positions.
+
+    ``motion``: the start point's (velocities, accelerations), if given. A start in motion
+    is refused (``INVALID_REQUEST``): every plan starts at rest, and one planned from rest
+    for a moving robot would jump in velocity. A move is stopped or left from motion by
+    naming the published trajectory it is on (``~/stop_request``).
+    """
     request_id = str(request_id)
     if not request_id:
         raise RequestError(ErrorCode.INVALID_REQUEST,
@@ -168,6 +194,16 @@ def joint_request(request_id: str, joint_names: Sequence[str],
                                f'the {label} point is not finite: {robot_joints[joint]} = '
                                f'{values[joint]}', request_id)
         ends.append(values)
+    for name, values in zip(('velocities', 'accelerations'), motion[0] if motion else ()):
+        try:
+            moving = np.any(np.asarray(values, dtype=float) != 0.0)
+        except (TypeError, ValueError, OverflowError):
+            moving = True
+        if moving:
+            raise RequestError(ErrorCode.INVALID_REQUEST,
+                               f'the start point has {name} {quote(list(values))}: a plan '
+                               'starts at rest (a moving robot is stopped on its path with '
+                               '~/stop_request, naming the trajectory it follows)', request_id)
     return Request(request_id, ends[0], ends[1], tuple(robot_joints))
 
 
@@ -206,23 +242,10 @@ def stop_request(text: str) -> StopRequest:
         if key not in data:
             raise RequestError(ErrorCode.INVALID_REQUEST, f'the request has no "{key}"',
                                request_id)
-    trajectory = data['trajectory']
-    if not isinstance(trajectory, str) or not trajectory:
-        raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'"trajectory" must be the id of a published trajectory, got '
-                           f'{quote(trajectory)}', request_id)
-    _check_text(trajectory, '"trajectory"', MAX_ID, request_id)
-    at = data['at']
-    if isinstance(at, _NotFinite):
-        raise RequestError(ErrorCode.NOT_FINITE, f'"at" is {at.quoted}, not a finite number',
-                           request_id)
-    if isinstance(at, bool) or not isinstance(at, (int, float)):
-        raise RequestError(ErrorCode.INVALID_REQUEST,
-                           f'"at" must be a number of seconds, got {quote(at)}', request_id)
-    return StopRequest(request_id, trajectory, float(at))
+    return StopRequest(request_id, *_moment(data, request_id))
 
 
-def _json_object(text: str) -> '_Object':
+def _json_object(text: str) -> JsonObject:
     """Return a request's JSON object; raise RequestError (with its leading id) if not one."""
     if len(text) > MAX_TEXT:
         raise RequestError(ErrorCode.INVALID_REQUEST,
@@ -231,8 +254,7 @@ def _json_object(text: str) -> '_Object':
     try:
         # Numbers no float holds become markers (NOT_FINITE below, naming the field) rather
         # than raising (an integer of over 4300 digits) or overflowing later.
-        data = json.loads(text, parse_int=_integer, parse_float=_float,
-                          parse_constant=_NotFinite, object_pairs_hook=_Object)
+        data = loads(text)
     except (ValueError, RecursionError, MemoryError) as exc:
         raise RequestError(ErrorCode.INVALID_REQUEST,
                            f'the request is not JSON ({str(exc)[:QUOTE]})',
@@ -243,7 +265,7 @@ def _json_object(text: str) -> '_Object':
     return data
 
 
-def _only_keys(data: '_Object', keys: Sequence[str], which: str, request_id: str) -> None:
+def _only_keys(data: JsonObject, keys: Sequence[str], which: str, request_id: str) -> None:
     """Raise RequestError for a key given twice or one not in ``keys`` (``which``: those)."""
     if data.repeated:
         raise RequestError(ErrorCode.INVALID_REQUEST,
@@ -256,118 +278,21 @@ def _only_keys(data: '_Object', keys: Sequence[str], which: str, request_id: str
                            request_id)
 
 
-def quote(value, limit: int = QUOTE) -> str:
-    """Return ``value`` as JSON text of at most about ``limit`` characters; never raise."""
-    parts = []
-    room = [limit]
-
-    def put(text: str) -> None:
-        parts.append(text)
-        room[0] -= len(text)
-        if room[0] < 0:
-            raise _Full
-
-    def walk(item, depth: int) -> None:
-        if depth > 8:  # deep nesting: bounded work, and no RecursionError
-            put('...')
-        elif isinstance(item, _NotFinite):
-            put(item.quoted)
-        elif isinstance(item, str):
-            put(json.dumps(item[:limit]))  # ASCII escapes: lone surrogates too
-        elif isinstance(item, bool) or item is None:
-            put(json.dumps(item))
-        elif isinstance(item, int):
-            put(str(item) if item.bit_length() < 1024 else f'({_digits(item)} digits)')
-        elif isinstance(item, float):
-            put(json.dumps(item))
-        elif isinstance(item, dict):
-            put('{')
-            for index, (key, element) in enumerate(item.items()):
-                put(', ' if index else '')
-                walk(key, depth + 1)
-                put(': ')
-                walk(element, depth + 1)
-            put('}')
-        elif isinstance(item, (list, tuple)):
-            put('[')
-            for index, element in enumerate(item):
-                put(', ' if index else '')
-                walk(element, depth + 1)
-            put(']')
-        else:
-            put(f'<{type(item).__name__}>')
-
-    try:
-        walk(value, 0)
-    except _Full:
-        return ''.join(parts)[:limit] + '...'
-    except Exception:  # noqa: B902 - a quote in an error message must not fail itself
-        return f'<{type(value).__name__}>'
-    return ''.join(parts)
-
-
-# ----------------------------------------------------------------- reading the JSON
-
-
-class _Full(Exception):
-    """A quote has reached its length."""
-
-
-class _NotFinite:
-    """A JSON number that no finite float holds: as written, or its length (``quoted``)."""
-
-    __slots__ = ('text', 'quoted')
-
-    def __init__(self, text: str, literal: bool = True):
-        self.text = text
-        self.quoted = text if literal else f'({text})'
-
-
-class _Object(dict):
-    """A JSON object; ``repeated`` lists the keys it has more than once."""
-
-    def __init__(self, pairs):
-        super().__init__(pairs)
-        self.repeated = []
-        if len(self) != len(pairs):
-            seen = set()
-            self.repeated = [k for k, _ in pairs if k in seen or seen.add(k)]
-
-
-def _integer(text: str):
-    digits = len(text) - text.startswith('-')
-    if digits > 309:  # at least 10**309: beyond the largest float, and int() may refuse it
-        return _NotFinite(f'{digits} digits', literal=False)
-    value = int(text)
-    try:
-        float(value)
-    except OverflowError:
-        return _NotFinite(f'{digits} digits', literal=False)
-    return value
-
-
-def _float(text: str):
-    value = float(text)
-    if math.isfinite(value):
-        return value
-    if len(text) <= 40:
-        return _NotFinite(text)
-    return _NotFinite(f'{len(text)} characters', literal=False)
-
-
 def _end(value, key: str, request_id: str, robot_joints: Sequence[str]) -> End:
-    """Return a station name or joint angles from a JSON value."""
+    """Return a station name, joint angles or (``"from"`` only) a start in motion."""
+    if key == 'from' and isinstance(value, dict):
+        return _moving(value, request_id)
     if isinstance(value, str):
         _check_text(value, f'"{key}"', MAX_NAME, request_id)
         return value
     if isinstance(value, list) and all(
-            isinstance(v, (int, float, _NotFinite)) and not isinstance(v, bool) for v in value):
+            isinstance(v, (int, float, NotFinite)) and not isinstance(v, bool) for v in value):
         if robot_joints and len(value) != len(robot_joints):
             raise RequestError(ErrorCode.JOINT_MISMATCH,
                                f'"{key}" has {len(value)} joint angles; the robot has '
                                f'{_joints(robot_joints)}', request_id)
         for index, v in enumerate(value):
-            if isinstance(v, _NotFinite):
+            if isinstance(v, NotFinite):
                 raise RequestError(ErrorCode.NOT_FINITE,
                                    f'"{key}"[{index}] is not a finite number ({v.text})',
                                    request_id)
@@ -375,6 +300,33 @@ def _end(value, key: str, request_id: str, robot_joints: Sequence[str]) -> End:
     raise RequestError(ErrorCode.INVALID_REQUEST,
                        f'"{key}" must be a station name or a list of joint angles, got '
                        f'{quote(value)}', request_id)
+
+
+def _moving(value: dict, request_id: str) -> Moving:
+    """Return the start in motion ``{"trajectory": id, "at": seconds}`` of a "from"."""
+    if sorted(value) != ['at', 'trajectory']:
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"from" in motion is {{"trajectory": ..., "at": ...}} and nothing '
+                           f'else, got {quote(value)}', request_id)
+    return Moving(*_moment(value, request_id))
+
+
+def _moment(data, request_id: str) -> tuple:
+    """Return (trajectory id, at) of a stop request or a start in motion, checked."""
+    trajectory = data['trajectory']
+    if not isinstance(trajectory, str) or not trajectory:
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"trajectory" must be the id of a published trajectory, got '
+                           f'{quote(trajectory)}', request_id)
+    _check_text(trajectory, '"trajectory"', MAX_ID, request_id)
+    at = data['at']
+    if isinstance(at, NotFinite):
+        raise RequestError(ErrorCode.NOT_FINITE, f'"at" is {at.quoted}, not a finite number',
+                           request_id)
+    if isinstance(at, bool) or not isinstance(at, (int, float)):
+        raise RequestError(ErrorCode.INVALID_REQUEST,
+                           f'"at" must be a number of seconds, got {quote(at)}', request_id)
+    return trajectory, float(at)
 
 
 def _check_text(text: str, what: str, longest: int, request_id: str) -> None:
@@ -395,10 +347,6 @@ def _check_text(text: str, what: str, longest: int, request_id: str) -> None:
 
 def _joints(robot_joints: Sequence[str]) -> str:
     return f'{len(robot_joints)} joints ({", ".join(robot_joints)})'
-
-
-def _digits(value: int) -> int:
-    return int(abs(value).bit_length() * math.log10(2)) + 1
 
 
 def end_of_text(text: str) -> Union[str, list]:

@@ -133,7 +133,7 @@ def _braked(trajectory, at, robot, acceleration, jerk, wafer) -> Optional[Stop]:
             return None
         while True:
             path = _path(trajectory, robot.arm, at, min(at + coast + window, at + left))
-            stop, ended = _shares(trajectory, path, at + coast, coast, robot, acceleration,
+            stop, ended = _shares(trajectory, path, at, coast, robot, acceleration,
                                   jerk, wafer)
             if stop is not None:
                 return stop
@@ -143,20 +143,23 @@ def _braked(trajectory, at, robot, acceleration, jerk, wafer) -> Optional[Stop]:
     return None
 
 
-def _shares(trajectory, path, begin, coast, robot, acceleration, jerk, wafer) -> tuple:
+def _shares(trajectory, path, at, coast, robot, acceleration, jerk, wafer) -> tuple:
     """
-    Return (stop or None, whether every try ended): braking from ``begin`` at each share.
+    Return (stop or None, whether every try ended): braking ``coast`` s after ``at``.
+
+    Each share of the limits in turn (``SHARES``).
 
     A try that runs past the samples ends none: the caller samples more of the path.
     """
     for share in SHARES:
-        phases, status = _timing(path, begin, acceleration, jerk, wafer, share)
+        phases, status = _timing(path, at + coast, acceleration, jerk, wafer, share)
         if status == PAST:
             return None, False
         if status == GAVE_UP:
             continue
         if coast > 0.0:
-            phases = _coasted(phases, begin - coast, coast)
+            # From ``at`` itself: (at + coast) - coast need not be ``at`` again.
+            phases = _coasted(phases, at, coast)
         stop = Retimed(trajectory, JerkProfile(*phases))
         if _keeps(stop, robot):
             return Stop(stop, share, 'braked'), True
