@@ -83,6 +83,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_port_table.py
 	$(ENV) $(PY) bench/bench_study.py
 	$(ENV) $(PY) bench/bench_stop.py
+	$(ENV) $(PY) bench/bench_stop_node.py
 
 clean:
 	rm -rf .colcon
