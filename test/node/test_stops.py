@@ -18,12 +18,17 @@ def _trajectory(harness, request_id: str):
                      for name in ('positions', 'velocities', 'accelerations')))
 
 
+def _moving(harness, request_id: str, cell, roadmap) -> tuple:
+    """Have the node publish loadport1 -> loadlock2; return (its curve, 30 % of its time)."""
+    harness.send_stations({'id': request_id, 'from': 'loadport1', 'to': 'loadlock2'})
+    assert values(harness.result(request_id))['code'] == 'OK'
+    move = Planner(cell, roadmap).plan('loadport1', 'loadlock2').trajectory
+    return move, 0.3 * move.duration
+
+
 def test_a_published_move_stops_on_its_path_and_a_stop_stops_again(
         harness, default_cell, default_roadmap):
-    harness.send_stations({'id': 'm1', 'from': 'loadport1', 'to': 'loadlock2'})
-    assert values(harness.result('m1'))['code'] == 'OK'
-    move = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
-    at = 0.3 * move.duration
+    move, at = _moving(harness, 'm1', default_cell, default_roadmap)
     harness.send_stop({'id': 's1', 'trajectory': 'm1', 'at': at})
     result = harness.result('s1')
     assert result.level == DiagnosticStatus.OK, result.message
@@ -120,10 +125,7 @@ def test_a_stop_is_stamped_when_it_starts(harness):
 
 def test_a_move_diverted_in_motion_starts_in_its_state_and_goes_to_the_new_goal(
         harness, default_cell, default_roadmap):
-    harness.send_stations({'id': 'm6', 'from': 'loadport1', 'to': 'loadlock2'})
-    assert values(harness.result('m6'))['code'] == 'OK'
-    move = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
-    at = 0.3 * move.duration
+    move, at = _moving(harness, 'm6', default_cell, default_roadmap)
     harness.send_stations({'id': 'd1', 'from': {'trajectory': 'm6', 'at': at},
                            'to': 'loadlock1'})
     result = harness.result('d1')

@@ -31,9 +31,6 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -54,6 +51,7 @@ from wafer_planner_ros.node.health import diagnostics
 from wafer_planner_ros.node.live import LiveView
 from wafer_planner_ros.node.loader import QUEUED
 from wafer_planner_ros.node.messages import Sent
+from wafer_planner_ros.node.process import spin
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
 from wafer_planner_ros.node.recording_switch import RecordingSwitch
 from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
@@ -383,25 +381,7 @@ def main(args=None) -> int:
     # (default 5 ms) so that status queries and answers are not held up by planning.
     sys.setswitchinterval(0.001)
     load_kernels()  # beside ROS's start and the roadmap's load
-    rclpy.init(args=args)
-    node, executor, code = None, None, 0
-    try:
-        node = WaferPlannerNode(own_process=True)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:
-        print(f'wafer_planner: bad parameter: {exc}', flush=True)
-        code = 2
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return spin(lambda: WaferPlannerNode(own_process=True), 'wafer_planner', args)
 
 
 def entry_point() -> None:

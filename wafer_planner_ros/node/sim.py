@@ -30,9 +30,6 @@ from typing import Optional
 
 import numpy as np
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -44,6 +41,7 @@ from visualization_msgs.msg import MarkerArray
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.node import markers, startup
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
+from wafer_planner_ros.node.process import spin
 from wafer_planner_ros.service.execution import samples_of, TrajectoryFollower
 from wafer_planner_ros.service.execution import TrajectoryRefused
 
@@ -209,28 +207,7 @@ def _check_parameters(parameters) -> SetParametersResult:
 def main(args=None) -> int:
     """Run the simulated arm until interrupted (Ctrl-C or SIGTERM)."""
     startup.load_kernels()  # the wafer acceleration's, beside ROS's start
-    rclpy.init(args=args)
-    node, executor, code = None, None, 0
-    try:
-        executor = SingleThreadedExecutor()
-        node = SimulatedArm()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:
-        print(f'wafer_sim: bad parameter: {exc}', flush=True)
-        code = 2
-    except Exception:  # noqa: B902 - a signal before spinning shuts the context down
-        if rclpy.ok():
-            raise
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return spin(SimulatedArm, 'wafer_sim', args)
 
 
 def entry_point() -> None:
