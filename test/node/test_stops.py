@@ -147,5 +147,8 @@ def test_a_move_diverted_in_motion_starts_in_its_state_and_goes_to_the_new_goal(
     harness.send_stations({'id': 'd2', 'from': {'trajectory': 'nothing', 'at': 0.1},
                            'to': 'loadlock1'})
     harness.send_stations({'id': 'd3', 'from': {'trajectory': 'm6'}, 'to': 'loadlock1'})
+    harness.send_stations({'id': 'd5', 'from': {'trajectory': 'm6', 'at': at},
+                           'to': 'loadlock1', 'load': 'empty'})
     assert values(harness.result('d2'))['code'] == 'UNKNOWN_TRAJECTORY'
     assert values(harness.result('d3'))['code'] == 'INVALID_REQUEST'
+    assert values(harness.result('d5'))['code'] == 'INVALID_REQUEST'

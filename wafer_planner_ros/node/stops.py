@@ -76,7 +76,8 @@ class Stops:
 
         The move leaves the kept trajectory it names at its moment (``Planner.divert``),
         planned on ``planner`` within ``budget`` s; stamped when it starts, as a stop is.
-        Raise PlanningError: ``UNKNOWN_TRAJECTORY`` for a trajectory not kept, else as
+        Raise PlanningError: ``UNKNOWN_TRAJECTORY`` for a trajectory not kept,
+        ``INVALID_REQUEST`` for another load than the trajectory's, else as
         ``Planner.divert`` does.
         """
         moving = request.start
@@ -87,6 +88,11 @@ class Stops:
                                 f'no trajectory {moving.trajectory!r} published by this node '
                                 f'(it keeps the last {KEPT})')
         result, stamp = kept[1], kept[3]
+        if request.load != result.load:
+            # The wafer is on the blade or not: that does not change in motion.
+            raise PlanningError(ErrorCode.INVALID_REQUEST,
+                                f'{moving.trajectory!r} moves {result.load}: a move left in '
+                                f'motion keeps its load, not {request.load}')
         return planner.divert(result.trajectory, moving.at, request.goal, moving.trajectory,
                               request.load, deadline, budget or None), later(stamp, moving.at)
 
