@@ -96,10 +96,12 @@ def moving_state(trajectory: Trajectory, at: float) -> tuple:
 
 def controlled_stop(trajectory: Trajectory, at: float, robot) -> Stop:
     """
-    Return the fastest stop of ``trajectory`` from ``at`` on its path (the module).
+    Return the stop of ``trajectory`` from ``at`` on its path, the soonest found (the module).
 
-    Under every limit of ``robot``'s limit set, checked as the verification does; raise
-    PlanningError as ``moving_state`` does.
+    Under every limit of ``robot``'s limit set, checked more densely than the verification
+    does; the braking kernel's timing, or the rest of the curve where none keeps every
+    limit sooner (so not always the time-optimal stop). Raise PlanningError as
+    ``moving_state`` does.
     """
     moving_state(trajectory, at)
     at = float(at)
