@@ -17,8 +17,9 @@ from wafer_planner_ros.planner import Planner
 
 START = 'loadport1'
 GOAL = 'loadlock2'
-LEAD = 0.4
-"""s between sending a stop request and the moment it stops at (the answer comes first)."""
+LEAD = 1.0
+"""s between sending a stop request and the moment it stops at: the answer must come first
+(a stop takes tens to hundreds of ms on 2 cores, more under the whole suite)."""
 
 
 @pytest.fixture(scope='module')
@@ -98,7 +99,7 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     # Each acceleration is the average over its step: two averages differ by at most the
     # jerk limit times the time between the steps' middles.
     middles = 0.5 * (t[near][1:] + t[near][:-1])
-    around = np.abs(middles - at) < 0.05
+    around = np.abs(middles - at) < 0.1
     assert around.sum() >= 3
     jumps = np.abs(np.diff(qdd[around], axis=0)) / np.diff(middles[around])[:, None]
     assert np.all(jumps <= limits.jerk * (1 + 1e-3))
@@ -113,7 +114,9 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     assert stop.verification.ok and max(stop.verification.ratios.values()) <= 1.0
     assert stop.cycle_time == stop_time
     stopping = (t >= at) & (t <= at + stop_time)
-    assert stopping.sum() >= 0.5 * 100 * stop_time  # at 100 Hz, give or take a busy machine
+    # The arm publishes at 100 Hz, fewer when both cores are busy (28 Hz under the whole
+    # suite once): each check here holds whatever the spacing of the states it reads.
+    assert stopping.sum() >= 3
     curve = stop.trajectory.evaluate(t[stopping] - at)
     assert np.abs(q[stopping] - curve).max() < limits.jerk.max() * 0.01 ** 3
     # At rest on the move's path, short of the goal; before ``at``, the move itself.
