@@ -94,6 +94,12 @@ class PlannerPeer(Node):
                    for name, namespace in self.get_node_names_and_namespaces())
 
 
+STOP_LEAD = 0.25
+"""s before the moment it stops at that ``ask_planner`` sends a stop request: a stop is
+planned in tens of milliseconds, and a controller given it after its moment would pick it
+up from where the stop should be by then (a lurch)."""
+
+
 def ask_planner(planner: str, request: dict, timeout: float,
                 say: Callable[[str], None] = lambda text: None,
                 stop_after: Optional[float] = None) -> Optional[tuple]:
@@ -101,10 +107,12 @@ def ask_planner(planner: str, request: dict, timeout: float,
     Return (result, trajectory or None) of a station request to ``planner``.
 
     None when no answer came within ``timeout`` seconds (or on Ctrl-C); raise
-    ``NoPlannerNode`` when the node is not found. ``stop_after``: then, ``stop_after``
-    seconds after the trajectory's start (its ``header.stamp``), send a stop request of it
-    (id: the request's with ``-stop``) and return (result, trajectory, stop result, stop
-    trajectory); the stop's answer is waited for up to ``timeout`` seconds more.
+    ``NoPlannerNode`` when the node is not found. ``stop_after``: then send a stop request
+    of the trajectory at ``stop_after`` seconds after its start (its ``header.stamp``), id
+    the request's with ``-stop``, ``STOP_LEAD`` before that moment (at once if it is
+    sooner), so that its answer reaches the robot before it, and return (result,
+    trajectory, stop result, stop trajectory); the stop's answer is waited for up to
+    ``timeout`` seconds more.
     """
     rclpy.init()
     try:
@@ -114,7 +122,8 @@ def ask_planner(planner: str, request: dict, timeout: float,
             if answer is None or stop_after is None or answer[1] is None:
                 return answer
             stamp = answer[1].header.stamp
-            time.sleep(max(0.0, stamp.sec + 1e-9 * stamp.nanosec + stop_after - time.time()))
+            time.sleep(max(0.0, stamp.sec + 1e-9 * stamp.nanosec + stop_after - STOP_LEAD
+                           - time.time()))
             stop = {'id': f"{request['id']}-stop", 'trajectory': request['id'],
                     'at': stop_after}
             stopped = client.ask(stop, timeout, say, client.stops)
