@@ -67,11 +67,11 @@ def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
     planner's moves from rest. Raise PlanningError as ``stop`` and the move to the goal do.
     """
     begun = time.perf_counter()
+    q, qd, qdd = moving_state(trajectory, at)
     halted = stop(planner, trajectory, at, label)
     rested = halted.goal_q
     onward = planner.planned(rested, goal, deadline, until)
     curve = Chained([halted.trajectory, onward.trajectory])
-    q, qd, qdd = (x[0] for x in trajectory.evaluate_orders([float(at)], (0, 1, 2)))
     checked = time.perf_counter()
     verification = verify(curve, planner.cell, q, onward.goal_q, moving=(qd, qdd))
     if not verification.ok:
