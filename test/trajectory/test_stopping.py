@@ -139,3 +139,24 @@ def test_a_stop_that_follows_the_move_first_starts_exactly_in_its_state(planner,
     assert stop.verification.ok and stop.metrics['timing'] == 'braked'
     assert stop.trajectory.timing.jerks[0] == 0.0  # following the move
     assert np.array_equal(stop.positions[0], move.evaluate([at])[0])
+
+
+
+@pytest.mark.parametrize('fraction', [0.2, 0.5, 0.8])
+def test_a_divert_starts_in_the_moving_state_and_ends_exactly_at_the_new_goal(
+        planner, fraction):
+    """The stop then the move from rest as one verified curve (at 0.2 it once missed its goal)."""
+    move = planner.plan('loadlock1', 'loadport3').trajectory
+    at = fraction * move.duration
+    diverted = planner.divert(move, at, 'loadport1')
+    curve = diverted.trajectory
+    q, qd, qdd = (values[0] for values in move.evaluate_orders([at]))
+    (q0, q1), (v0, v1), (a0, a1) = curve.evaluate_orders([0.0, curve.duration])
+    assert np.array_equal(q0, q)
+    assert np.abs(np.concatenate([v0 - qd, a0 - qdd])).max() <= 1e-9
+    assert diverted.goal.label == 'loadport1'
+    assert np.array_equal(q1, diverted.goal_q)
+    assert np.abs(np.concatenate([v1, a1])).max() <= 1e-9
+    assert verify(curve, planner.cell, q, diverted.goal_q, moving=(qd, qdd)).ok
+    metrics = diverted.metrics
+    assert curve.duration == pytest.approx(metrics['stop_time'] + metrics['onward_time'])

@@ -49,7 +49,11 @@ class Chained(Trajectory):
             here = part == k
             if not here.any():
                 continue
-            values = curve.evaluate_orders(t[here] - self._starts[k], orders)
+            # The chain's end is the last part's, exactly (the sum of the parts' durations
+            # less the last part's start can fall short of it by a rounding).
+            local = np.where(t[here] >= self.duration, curve.duration,
+                             t[here] - self._starts[k])
+            values = curve.evaluate_orders(local, orders)
             if out is None:
                 out = [np.empty((len(t), v.shape[1])) for v in values]
             for target, value in zip(out, values):
