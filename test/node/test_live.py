@@ -16,16 +16,20 @@ import threading
 import time
 from types import SimpleNamespace
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from node_harness import Harness, isolate_dds, values, wait_for
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from wafer_planner_ros.node import live_server, markers
 from wafer_planner_ros.node.live import LiveView
+from wafer_planner_ros.node.qos import LATCHED
 from wafer_planner_ros.recording.msgdefs import definition
 from wafer_planner_ros.service.settings import settings_from
 import yaml
@@ -41,10 +45,16 @@ TOPICS = {'/wafer_planner/roadmap_markers': MarkerArray,
           '/wafer_planner/trajectory': JointTrajectory,
           '/wafer_planner/result': DiagnosticStatus,
           '/diagnostics': DiagnosticArray}
+ROBOT = {'/joint_states': JointState, '/wafer_sim/arm_markers': MarkerArray,
+         '/wafer_sim/wafer_acceleration': Float64MultiArray}
+"""The robot's topics the view relays (``live.robot``: the simulated arm by default)."""
+TOPICS.update(ROBOT)
 TYPES = {MarkerArray: 'visualization_msgs/msg/MarkerArray',
          JointTrajectory: 'trajectory_msgs/msg/JointTrajectory',
          DiagnosticStatus: 'diagnostic_msgs/msg/DiagnosticStatus',
-         DiagnosticArray: 'diagnostic_msgs/msg/DiagnosticArray'}
+         DiagnosticArray: 'diagnostic_msgs/msg/DiagnosticArray',
+         JointState: 'sensor_msgs/msg/JointState',
+         Float64MultiArray: 'std_msgs/msg/Float64MultiArray'}
 FRAMES = '/wafer_planner/frames'
 """Where the joint-space frame stands (foxglove.FrameTransform, kept as bytes here)."""
 MESSAGE_DATA = 0x01
@@ -539,7 +549,8 @@ def test_the_view_listens_on_this_machine_unless_told_and_then_warns(harness):
     assert settings_from({}).live_host == '127.0.0.1'
     packaged = yaml.safe_load((ROOT / 'config' / 'wafer_planner.yaml').read_text())
     assert packaged['/**']['ros__parameters']['live'] == {'port': 0, 'host': '127.0.0.1',
-                                                          'max_clients': 4}
+                                                          'max_clients': 4,
+                                                          'robot': '/wafer_sim'}
     lines = []
     log = SimpleNamespace(error=lines.append, info=lines.append, warning=lines.append)
     publisher = SimpleNamespace(topic_name='/wafer_planner/roadmap_markers',
@@ -556,3 +567,63 @@ def test_the_view_listens_on_this_machine_unless_told_and_then_warns(harness):
                             'machine)')
     finally:
         view.stop()
+
+
+def test_the_robot_is_shown_moving_its_joint_states_arm_and_wafer_acceleration_relayed(
+        harness):
+    peer = harness.peer
+    publishers = {topic: peer.create_publisher(kind, topic, LATCHED if kind is MarkerArray
+                                               else 10) for topic, kind in ROBOT.items()}
+    wait_for(lambda: all(p.get_subscription_count() for p in publishers.values()), 20)
+    sent = {'/joint_states': JointState(name=['shoulder', 'elbow', 'wrist'],
+                                        position=[0.1, -0.2, 0.3], velocity=[1.0, 0.0, -1.0]),
+            '/wafer_sim/wafer_acceleration': Float64MultiArray(data=[0.5, -0.25, 0.56, 0.57]),
+            '/wafer_sim/arm_markers': markers_of(harness)}
+
+    async def relayed(client, topic):
+        # Published until it comes through: the view subscribes the client asynchronously.
+        for _ in range(200):
+            publishers[topic].publish(sent[topic])
+            try:
+                return await client.receive(topic, timeout=0.1)
+            except asyncio.TimeoutError:
+                continue
+        raise AssertionError(f'{topic} was not relayed')
+
+    async def run():
+        client = await Client.connect(_url(harness))
+        await client.subscribe(*ROBOT)
+        got = {topic: await relayed(client, topic) for topic in ROBOT}
+        await client.close()
+        return got
+
+    got = asyncio.run(run())
+    sent['/wafer_sim/arm_markers'] = deserialize_message(sent['/wafer_sim/arm_markers'],
+                                                         MarkerArray)
+    assert got == sent  # each as it was published
+    assert {m.ns for m in got['/wafer_sim/arm_markers'].markers} >= {'arm', 'arm_wafer'}
+
+
+def markers_of(harness) -> bytes:
+    """Return the arm's markers as the simulated arm publishes them (its CDR bytes)."""
+    return markers.arm_markers(harness.node._worker.cell, [0.0, 0.5, -0.5], 'efem',
+                               Time(sec=1))
+
+
+def test_live_robot_names_the_robot_shown_and_a_bad_name_is_refused(harness):
+    node = harness.node
+    bad = node.set_parameters([Parameter('live.robot', value='2arm/x-y')])[0]
+    assert not bad.successful and 'live.robot' in bad.reason
+    assert settings_from({'live.robot': 'arm2'}).live_robot == '/arm2'
+    try:
+        assert node.set_parameters([Parameter('live.robot', value='cell3/arm')])[0].successful
+        relayed = set(node._live.topics) - set(TOPICS)
+        assert relayed == {'/cell3/arm/arm_markers', '/cell3/arm/wafer_acceleration'}
+        assert node.set_parameters([Parameter('live.robot', value='')])[0].successful
+        assert '/joint_states' in node._live.topics
+        assert not any(t.endswith('/arm_markers') for t in node._live.topics)
+    finally:
+        node.set_parameters([Parameter('live.robot', value='/wafer_sim')])
+    assert set(TOPICS) <= set(node._live.topics)
+    harness.send_stations({'id': 'robot1', 'from': 'loadport1', 'to': 'loadlock1'})
+    assert values(harness.result('robot1'))['code'] == 'OK'

@@ -6,12 +6,14 @@ does; the stop, stamped where it starts, replaces the rest of the move there. Wh
 did is read back from ``/joint_states`` (100 Hz).
 """
 
+import signal
+import subprocess
+import sys
 import time
 
 from node_harness import values, wait_for
 import numpy as np
 import pytest
-from rclpy.parameter import Parameter
 
 from wafer_planner_ros.planner import Planner
 
@@ -24,32 +26,41 @@ LEAD = 1.0
 
 @pytest.fixture(scope='module')
 def arm_and_node(roadmap_cache, tmp_path_factory):
-    """Yield the node and the simulated arm on one executor, the arm at ``START``."""
+    """Yield the node, and the simulated arm in a process of its own at ``START``."""
     from node_harness import Harness, isolate_dds
-    from wafer_planner_ros.node.sim import SimulatedArm
     isolate_dds(tmp_path_factory.mktemp('dds'))
-
-    def arm(context):
-        return SimulatedArm(context=context, parameter_overrides=[
-            Parameter('initial_station', value=START)])
-
-    running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0,
-                       'recording.directory': str(tmp_path_factory.mktemp('recordings'))},
-                      beside=[arm])
-    from sensor_msgs.msg import JointState
-    running.joint_states = []
-    running.peer.create_subscription(JointState, '/joint_states', running.joint_states.append,
-                                     1000)
-    wait_for(lambda: running.joint_states, 20.0)
-    yield running
-    running.close()
+    # Its own process, as ``make run`` starts it: in this one the arm's executor would wait
+    # for the GIL behind the node's and the test's, and publish at a few Hz.
+    arm = subprocess.Popen([sys.executable, '-m', 'wafer_planner_ros.node.sim', '--ros-args',
+                            '-p', f'initial_station:={START}'],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    running = None
+    try:
+        running = Harness({'roadmap.cache_dir': str(roadmap_cache), 'planning.timeout': 30.0,
+                           'recording.directory': str(tmp_path_factory.mktemp('recordings'))})
+        from sensor_msgs.msg import JointState
+        running.joint_states = []
+        running.peer.create_subscription(JointState, '/joint_states',
+                                         running.joint_states.append, 1000)
+        wait_for(lambda: running.joint_states, 60.0)
+        yield running
+    finally:
+        arm.send_signal(signal.SIGINT)
+        try:
+            arm.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            arm.kill()
+        if running is not None:
+            running.close()
 
 
 def _seconds(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
-@pytest.mark.parametrize('share', [0.15, 0.3])
+# Ten moments of the move, from the first a stop request can reach in time (``LEAD`` after
+# the move's answer) to near its end; the core's test stops it from its start on.
+@pytest.mark.parametrize('share', [0.42, 0.47, 0.52, 0.57, 0.63, 0.68, 0.73, 0.79, 0.84, 0.9])
 def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
         arm_and_node, default_cell, default_roadmap, share):
     harness = arm_and_node
@@ -63,12 +74,14 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
         wait_for(lambda: not np.any(harness.joint_states[-1].velocity) and np.abs(
             np.array(harness.joint_states[-1].position)
             - default_cell.stations[START].configs[0].q).max() < 1e-9, 30.0)
+    # Planned here before the arm moves: planning in this process while it moves would
+    # hold up the arm's executor thread (the GIL), as no separate robot is held up.
+    move = Planner(default_cell, default_roadmap).plan(START, GOAL).trajectory
     harness.send_stations({'id': request_id, 'from': START, 'to': GOAL})
     assert values(harness.result(request_id))['code'] == 'OK'
     wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
     sent = next(t for t in harness.trajectories if t.header.frame_id == request_id)
     began = _seconds(sent.header.stamp)
-    move = Planner(default_cell, default_roadmap).plan(START, GOAL).trajectory
     assert float(values(harness.result(request_id))['cycle_time']) == move.duration
     at = max(share * move.duration, time.time() - began + LEAD)
     wait_for(lambda: time.time() >= began + at - LEAD, 10.0)
@@ -86,31 +99,36 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     q = np.array([m.position for m in executed])
     qd = np.array([m.velocity for m in executed])
     # Continuous across the splice at ``at``: no jump in position or velocity (each step
-    # within what the limits allow over the time between two states), and the acceleration
-    # from the velocities continuous there too. (From its own start on: a move the arm
+    # within what the limits allow over the time between two states), the acceleration
+    # from the velocities within its limit, and the motion the continuous one of the move
+    # until ``at`` and the stop after it (the core's, below): position and velocity within
+    # the departure of the controller's quintic between its 10 ms samples from the curve
+    # (the jerk limit times a step cubed, squared). (From its own start on: a move the arm
     # receives after its stamp is picked up where it should be by then, as a controller
     # does, which is the node's stamping of moves, not the stop.)
     limits = robot.limit_set.joints
+    planner = Planner(default_cell, default_roadmap)
+    stop = planner.stop(move, at, request_id)
     near = t >= at - 0.1
     dt = np.diff(t[near])[:, None]
     assert np.all(np.abs(np.diff(q[near], axis=0)) <= limits.velocity * dt * (1 + 1e-6) + 1e-9)
     qdd = np.diff(qd[near], axis=0) / dt
     assert np.all(np.abs(qdd) <= limits.acceleration * (1 + 1e-3))
-    # Each acceleration is the average over its step: two averages differ by at most the
-    # jerk limit times the time between the steps' middles.
-    middles = 0.5 * (t[near][1:] + t[near][:-1])
-    around = np.abs(middles - at) < 0.1
+    around = np.abs(t - at) < 0.1
     assert around.sum() >= 3
-    jumps = np.abs(np.diff(qdd[around], axis=0)) / np.diff(middles[around])[:, None]
-    assert np.all(jumps <= limits.jerk * (1 + 1e-3))
+    later = t[around] >= at
+    expected = [np.where(later[:, None], stopped, moving) for stopped, moving in zip(
+        stop.trajectory.evaluate_orders(np.maximum(t[around] - at, 0.0), (0, 1)),
+        move.evaluate_orders(t[around], (0, 1)))]
+    step = 0.01
+    assert np.abs(q[around] - expected[0]).max() < limits.jerk.max() * step ** 3
+    assert np.abs(qd[around] - expected[1]).max() < limits.jerk.max() * step ** 2
     # Within every limit: velocities, accelerations (from the velocities), the wafer's.
     assert np.all(np.abs(qd) <= limits.velocity * (1 + 1e-9))
     # While it stops, the arm follows the stop the core makes of the same move there, a
     # curve that keeps every limit (checked densely, and independently, in
     # test/trajectory/test_stopping.py), to within the controller's quintic between its
     # 10 ms samples (less than the jerk limit times a step cubed).
-    planner = Planner(default_cell, default_roadmap)
-    stop = planner.stop(move, at, request_id)
     assert stop.verification.ok and max(stop.verification.ratios.values()) <= 1.0
     assert stop.cycle_time == stop_time
     stopping = (t >= at) & (t <= at + stop_time)
@@ -119,8 +137,14 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     assert stopping.sum() >= 3
     curve = stop.trajectory.evaluate(t[stopping] - at)
     assert np.abs(q[stopping] - curve).max() < limits.jerk.max() * 0.01 ** 3
-    # At rest on the move's path, short of the goal; before ``at``, the move itself.
-    assert not np.any(qd[-1]) and np.abs(q[-1] - move.evaluate([move.duration])[0]).max() > 0.01
+    # At rest on the move's path: short of the goal when braked, at it when no braking on
+    # the path ends sooner than the rest of the move; before ``at``, the move itself.
+    goal = move.evaluate([move.duration])[0]
+    assert not np.any(qd[-1])
+    if stop.metrics['timing'] == 'rest':
+        assert np.array_equal(q[-1], goal)
+    else:
+        assert np.abs(q[-1] - goal).max() > 0.01
     dense = move.evaluate(np.linspace(0.0, move.duration, 40001))
     assert np.abs(dense - q[-1]).max(axis=1).min() < 1e-3
     # The controller's quintic between the 10 ms samples departs from the curve only where

@@ -138,13 +138,8 @@ class Peer:
 class Harness(Peer):
     """A planner node and a peer node on one private context and executor thread."""
 
-    def __init__(self, parameters: dict, beside=()):
-        """
-        Start the node with ``parameters`` (name -> value) and wait until it is ready.
-
-        ``beside``: functions of the context that make other nodes to spin with it (a
-        simulated arm).
-        """
+    def __init__(self, parameters: dict):
+        """Start the node with ``parameters`` (name -> value) and wait until it is ready."""
         # The station table and the budgeted optimisation take seconds to minutes of CPU
         # and their answers depend on time: off unless a test turns them on.
         parameters = {'recording.directory': tempfile.mkdtemp(prefix='wafer_recordings_'),
@@ -158,14 +153,11 @@ class Harness(Peer):
         rclpy.init(context=context)
         overrides = [Parameter(k, value=v) for k, v in parameters.items()]
         self.node = WaferPlannerNode(context=context, parameter_overrides=overrides)
-        self.beside = [make(context) for make in beside]
-        super().__init__(context, [self.node, *self.beside])
+        super().__init__(context, [self.node])
 
     def close(self) -> None:
         """Stop everything."""
         super().close()
-        for node in self.beside:
-            node.destroy_node()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 

@@ -141,7 +141,6 @@ def test_a_stop_that_follows_the_move_first_starts_exactly_in_its_state(planner,
     assert np.array_equal(stop.positions[0], move.evaluate([at])[0])
 
 
-
 @pytest.mark.parametrize('fraction', [0.2, 0.5, 0.8])
 def test_a_divert_starts_in_the_moving_state_and_ends_exactly_at_the_new_goal(
         planner, fraction):

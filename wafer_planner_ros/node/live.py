@@ -65,6 +65,7 @@ class LiveView:
         """
         self.name = name
         self.topics = {p.topic_name: type_name(p.msg_type) for p in publishers}
+        self._own = dict(self.topics)
         self.latched_topic = latched.topic_name
         self.log = log
         self._lock = threading.Lock()
@@ -109,6 +110,15 @@ class LiveView:
                              f'port {port} can watch (live.host 127.0.0.1 keeps it to this '
                              'machine)')
         return True
+
+    def relay(self, subscriptions: Sequence) -> None:
+        """
+        Serve the topics of ``subscriptions`` too (another node's, ``live_robot``), not others.
+
+        They are advertised from the next ``start`` on; their messages come to ``publish``.
+        """
+        self.topics = {**self._own, **{s.topic_name: type_name(s.msg_type)
+                                       for s in subscriptions}}
 
     def stop(self) -> None:
         """Stop serving (the clients are disconnected at once)."""

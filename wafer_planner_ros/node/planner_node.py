@@ -32,7 +32,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
@@ -49,9 +48,11 @@ from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.health import diagnostics
 from wafer_planner_ros.node.live import LiveView
+from wafer_planner_ros.node.live_robot import RobotRelay
 from wafer_planner_ros.node.loader import QUEUED
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.process import spin
+from wafer_planner_ros.node.qos import LATCHED, RELIABLE
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
 from wafer_planner_ros.node.recording_switch import RecordingSwitch
 from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
@@ -61,18 +62,12 @@ from wafer_planner_ros.service.requests import request_id_of, request_of, Reques
 from wafer_planner_ros.service.requests import stop_request
 from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
 
-# Requests and answers: reliable and keep-all, so that a burst is delivered whole (a
-# keep-last reader cache drops the oldest samples of a burst longer than its depth).
-RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
-                      reliability=ReliabilityPolicy.RELIABLE)
 DELIVER_SLICE = 0.005
 """s of publishing (and recording) per executor turn: a burst's answers, each recorded
 before it goes out, do not hold up ``~/get_status`` behind them."""
 STOP_WAIT = 0.2
 """s a stopping node waits for the worker's threads: idle ones end at once; a plan, a roadmap
 build or a station table being planned ends with the process (they write only whole files)."""
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # The QoS profiles, as the recording's channel metadata states them.
 RELIABLE_OFFERED = qos(keep_all=True, depth=RELIABLE.depth)
 LATCHED_OFFERED = qos(depth=1, transient_local=True)
@@ -110,6 +105,8 @@ class WaferPlannerNode(Node):
         self._live = LiveView(self.get_fully_qualified_name(), [
             self._roadmap_pub, self._path_pub, self._trajectory_pub, self._result_pub,
             self._diagnostics_pub], self._roadmap_pub, self.log)
+        self._robot = RobotRelay(self, self._live)
+        self._robot.follow(self.settings.live_robot, self.settings.live_port != 0)
         self._live.start(self.settings.live_host, self.settings.live_port,
                          self.settings.live_max_clients)
         # Raw: the request's bytes are recorded exactly as they arrived.
@@ -348,6 +345,7 @@ class WaferPlannerNode(Node):
             except Exception as exc:  # noqa: B902 - the parameters are set all the same
                 self.log.error(f'recording the parameters failed: {reason_of(exc)}')
             if any(name.startswith('live.') for name in changed):
+                self._robot.follow(settings.live_robot, settings.live_port != 0)
                 self._live.start(settings.live_host, settings.live_port,  # never raises
                                  settings.live_max_clients)
         return SetParametersResult(successful=True)

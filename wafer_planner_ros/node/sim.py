@@ -31,7 +31,6 @@ from typing import Optional
 import numpy as np
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -42,14 +41,10 @@ from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.node import markers, startup
 from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.process import spin
+from wafer_planner_ros.node.qos import LATCHED, RELIABLE
 from wafer_planner_ros.service.execution import samples_of, TrajectoryFollower
 from wafer_planner_ros.service.execution import TrajectoryRefused
 
-# As the planner publishes its trajectories: reliable and keep-all.
-RELIABLE = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_ALL,
-                      reliability=ReliabilityPolicy.RELIABLE)
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 MARKER_PERIOD = 0.05
 """s: the arm's markers go out at most this often (a viewer needs no more)."""
 JUMP = 1e-6

@@ -9,6 +9,7 @@ the parameter, both at start-up and when a parameter is set at run time.
 from dataclasses import dataclass
 import math
 from pathlib import Path
+import re
 from typing import Any, Mapping, NamedTuple, Optional, Tuple
 
 from wafer_planner_ros.cell.model import default_cell_path
@@ -27,6 +28,8 @@ class Parameter(NamedTuple):
     high: Optional[float] = None
 
 
+NODE_NAME = re.compile(r'/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
+"""A node's name, in a namespace or not (``live.robot``)."""
 MIB = 1 << 20
 MIN_BAG_SIZE = MIB
 """Bytes: room for what every file begins with (the compressed roadmap markers, mostly)."""
@@ -87,6 +90,10 @@ PARAMETERS: Tuple[Parameter, ...] = (
               'authentication)'),
     Parameter('live.max_clients', 4,
               'clients the live view serves at once; one more is refused', 1, 64),
+    Parameter('live.robot', '/wafer_sim',
+              'the robot node whose arm markers and wafer acceleration the live view shows, '
+              'beside /joint_states (the simulated arm by default); empty: /joint_states '
+              'alone'),
 )
 
 _BY_NAME = {p.name: p for p in PARAMETERS}
@@ -122,6 +129,8 @@ class NodeSettings:
     live_host: str
     live_max_clients: int
     """Clients the live view serves at once."""
+    live_robot: str = '/wafer_sim'
+    """The robot node the live view shows (``node.live_robot``), absolute; '': none."""
 
 
 def check(name: str, value) -> None:
@@ -140,6 +149,10 @@ def check(name: str, value) -> None:
         raise ValueError(f'{name} must be in [{spec.low}, {spec.high}], got {value!r}')
     if name in ('markers.frame_id', 'recording.directory', 'live.host') and not value.strip():
         raise ValueError(f'{name} must not be empty')
+    if name == 'live.robot' and value.strip() and not NODE_NAME.fullmatch(value.strip()):
+        raise ValueError(f'{name} must be a node name such as /wafer_sim (letters, digits '
+                         'and _, in parts that do not start with a digit), got '
+                         f'{value!r}')
     if name == 'recording.max_bag_size' and 0 < value < MIN_BAG_SIZE:
         raise ValueError(f'{name} must be 0 (no split) or at least {MIN_BAG_SIZE}, '
                          f'got {value!r}')
@@ -173,4 +186,10 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         recording_keep=merged['recording.keep'],
         frame_id=merged['markers.frame_id'],
         live_port=merged['live.port'], live_host=merged['live.host'].strip(),
-        live_max_clients=merged['live.max_clients'])
+        live_max_clients=merged['live.max_clients'],
+        live_robot=_absolute(merged['live.robot'].strip()))
+
+
+def _absolute(name: str) -> str:
+    """Return a node name with its leading slash ('' stays '')."""
+    return name if not name or name.startswith('/') else f'/{name}'
