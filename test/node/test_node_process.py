@@ -82,6 +82,17 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
         negative = _client(dds_env, '-2.4303,-1.5807,-0.7014', 'loadlock1', '--id', 'p4')
         assert negative.returncode == 0, negative.stdout + negative.stderr
         assert 'p4: ok:' in negative.stdout
+        # Stopped on its path 0.4 s in; diverted half-way to another station.
+        stopped = _client(dds_env, 'loadport1', 'loadlock2', '--id', 'p5', '--stop-after', '0.4')
+        assert stopped.returncode == 0, stopped.stdout + stopped.stderr
+        assert re.search(r'^p5-stop: ok: .*\n  cycle time \d+\.\d{3} s.*\(controlled-stop, ',
+                         stopped.stdout, re.M), stopped.stdout
+        diverted = _client(dds_env, 'loadport2', 'loadlock2', '--id', 'p6', '--divert-to',
+                           'loadlock1')
+        assert diverted.returncode == 0, diverted.stdout + diverted.stderr
+        assert re.search(r'^p6-divert: ok: p6 at \d+\.\d+ s -> loadlock1, cycle time .*\n  '
+                         r'cycle time \d+\.\d{3} s.*\(stop-then-move, ', diverted.stdout,
+                         re.M), diverted.stdout
     finally:
         node.send_signal(signal.SIGINT)
         output, _ = node.communicate(timeout=60)

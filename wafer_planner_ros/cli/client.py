@@ -6,8 +6,10 @@ client finds the node (``--node``, default ``/wafer_planner``), waits until it r
 ready (``~/get_status``), sends the request to ``~/plan_station_request`` and prints the
 ``~/result`` worded as ``wafer-plan`` words a plan (``--raw``: every value as sent), and
 the trajectory's size. ``--stop-after T`` then stops the move T seconds after it starts
-(``~/stop_request``: the controlled stop on its path) and prints the stop's answer too.
-Exit 0 when the plan (and the stop) is ok; 1 when the node answered with an error,
+(``~/stop_request``: the controlled stop on its path) and prints the stop's answer too;
+``--divert-to STATION`` instead sends the moving robot from there (T, or half-way without
+``--stop-after``) to STATION (a station request from the move) and prints that answer.
+Exit 0 when the plan (and the stop or divert) is ok; 1 when the node answered with an error,
 did not answer within ``--timeout``, or was not found within ``DISCOVERY`` seconds; 2 on a
 bad command line.
 """
@@ -44,6 +46,10 @@ def main(argv=None) -> int:
     parser.add_argument('--stop-after', type=float, metavar='T',
                         help='then stop the move T seconds after it starts (a stop request: '
                         'the controlled stop on its path) and print the stop too')
+    parser.add_argument('--divert-to', metavar='STATION',
+                        help='then send the moving robot to STATION instead, from the moment '
+                        'of --stop-after (default: half-way through the move); prints that '
+                        'answer too')
     parser.add_argument('--raw', action='store_true',
                         help="print every value of the node's result as it was sent")
     args = parser.parse_args(with_negative_ends(sys.argv[1:] if argv is None else argv))
@@ -58,15 +64,18 @@ def main(argv=None) -> int:
         request['load'] = args.load
     if args.stop_after is not None and not args.stop_after >= 0.0:
         parser.error(f'--stop-after must be a number of seconds >= 0, got {args.stop_after}')
+    if args.divert_to is not None and not args.divert_to.strip():
+        parser.error('--divert-to needs a station name')
     answer = ask_planner(node, request, args.timeout, lambda text: print(text, file=sys.stderr),
-                         args.stop_after)
+                         args.stop_after, args.divert_to)
     if answer is None:
         print(f'{request_id}: no answer from {node} within {args.timeout:g} s',
               file=sys.stderr)
         return EXIT_FAILURE
     codes = []
     parts = [answer[:2]] + ([answer[2:]] if len(answer) > 2 else [])
-    for (status, trajectory), name in zip(parts, (request_id, f'{request_id}-stop')):
+    then = f"{request_id}-{'stop' if args.divert_to is None else 'divert'}"
+    for (status, trajectory), name in zip(parts, (request_id, then)):
         if status is None:
             print(f'{name}: no answer from {node} within {args.timeout:g} s', file=sys.stderr)
             codes.append('')

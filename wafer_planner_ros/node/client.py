@@ -98,11 +98,15 @@ STOP_LEAD = 0.25
 """s before the moment it stops at that ``ask_planner`` sends a stop request: a stop is
 planned in tens of milliseconds, and a controller given it after its moment would pick it
 up from where the stop should be by then (a lurch)."""
+DIVERT_LEAD = 1.0
+"""s before the moment it leaves the move at that ``ask_planner`` sends a divert: the move
+from where the stop rests is planned too, in hundreds of milliseconds."""
 
 
 def ask_planner(planner: str, request: dict, timeout: float,
                 say: Callable[[str], None] = lambda text: None,
-                stop_after: Optional[float] = None) -> Optional[tuple]:
+                stop_after: Optional[float] = None,
+                divert_to: Optional[str] = None) -> Optional[tuple]:
     """
     Return (result, trajectory or None) of a station request to ``planner``.
 
@@ -112,22 +116,36 @@ def ask_planner(planner: str, request: dict, timeout: float,
     the request's with ``-stop``, ``STOP_LEAD`` before that moment (at once if it is
     sooner), so that its answer reaches the robot before it, and return (result,
     trajectory, stop result, stop trajectory); the stop's answer is waited for up to
-    ``timeout`` seconds more.
+    ``timeout`` seconds more. ``divert_to``: a station; instead of the stop, a station
+    request from the trajectory at ``stop_after`` (default: half-way) to it, id the
+    request's with ``-divert``, ``DIVERT_LEAD`` before that moment.
     """
     rclpy.init()
     try:
         client = _Client(planner)
         try:
             answer = client.ask(request, timeout, say)
-            if answer is None or stop_after is None or answer[1] is None:
+            if answer is None or (stop_after is None and divert_to is None) \
+                    or answer[1] is None:
                 return answer
-            stamp = answer[1].header.stamp
-            time.sleep(max(0.0, stamp.sec + 1e-9 * stamp.nanosec + stop_after - STOP_LEAD
+            sent = answer[1]
+            if stop_after is None:
+                last = sent.points[-1].time_from_start
+                stop_after = 0.5 * (last.sec + 1e-9 * last.nanosec)
+            if divert_to is None:
+                then = {'id': f"{request['id']}-stop", 'trajectory': request['id'],
+                        'at': stop_after}
+                publisher, lead = client.stops, STOP_LEAD
+            else:
+                then = {'id': f"{request['id']}-divert", 'to': divert_to,
+                        'from': {'trajectory': request['id'], 'at': stop_after},
+                        **({'load': request['load']} if 'load' in request else {})}
+                publisher, lead = client.requests, DIVERT_LEAD
+            stamp = sent.header.stamp
+            time.sleep(max(0.0, stamp.sec + 1e-9 * stamp.nanosec + stop_after - lead
                            - time.time()))
-            stop = {'id': f"{request['id']}-stop", 'trajectory': request['id'],
-                    'at': stop_after}
-            stopped = client.ask(stop, timeout, say, client.stops)
-            return answer + ((None, None) if stopped is None else stopped)
+            followed = client.ask(then, timeout, say, publisher)
+            return answer + ((None, None) if followed is None else followed)
         finally:
             client.destroy_node()
     except KeyboardInterrupt:
