@@ -84,6 +84,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_study.py
 	$(ENV) $(PY) bench/bench_stop.py
 	$(ENV) $(PY) bench/bench_stop_node.py
+	$(ENV) $(PY) bench/bench_divert.py
 
 clean:
 	rm -rf .colcon
