@@ -31,7 +31,6 @@ import sys
 import time
 
 from bench_stop import _stats, head_commit  # bench/: this script's folder is on the path
-import numpy as np
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs

@@ -6,8 +6,10 @@ health on ``/diagnostics``: ``health``; recording switched on and off: ``recordi
 the queues, deadlines and watchdog, ``worker``; loading the cell, roadmap, kernels and
 station table, ``loader``, then ``serving`` (a loaded roadmap taking over); what is
 published, ``messages`` and ``markers``; what is recorded, ``recording``; the Foxglove live
-view, ``live`` (the node's side) over ``live_server`` (the WebSocket protocol); the
-process and its start-up, ``main`` and ``startup``; failing safely, ``faults``; talking to a
-running node, ``client`` and ``replay_publish``; the simulated arm ``wafer-sim``, ``sim``. How
-a request is planned is not decided here but in ``service.planning``.
+view, ``live`` (the node's side) over ``live_server`` (the WebSocket protocol), and the
+robot it shows, ``live_robot``; the QoS everything here uses, ``qos``; the process and its
+start-up, ``main``, ``process`` and ``startup``; failing safely, ``faults``; stop requests,
+``stops``; talking to a running node, ``client`` and ``replay_publish``; the simulated arm
+``wafer-sim``, ``sim``. How a request is planned is not decided here but in
+``service.planning``.
 """

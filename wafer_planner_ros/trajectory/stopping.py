@@ -153,8 +153,12 @@ def _shares(trajectory, path, at, coast, robot, acceleration, jerk, wafer) -> tu
 
     A try that runs past the samples ends none: the caller samples more of the path.
     """
+    begin = at + coast
+    q, qd, qdd = (x[0] for x in trajectory.evaluate_orders([begin], (0, 1, 2)))
+    state = np.abs(qdd), np.abs(robot.arm.wafer_acceleration(q, qd, qdd))
     for share in SHARES:
-        phases, status = _timing(path, at + coast, acceleration, jerk, wafer, share)
+        phases, status = _timing(path, begin, *_kept(acceleration, wafer, share, *state),
+                                 jerk * share)
         if status == PAST:
             return None, False
         if status == GAVE_UP:
@@ -166,6 +170,21 @@ def _shares(trajectory, path, at, coast, robot, acceleration, jerk, wafer) -> tu
         if _keeps(stop, robot):
             return Stop(stop, share, 'braked'), True
     return None, True
+
+
+def _kept(acceleration, wafer, share: float, moving, wafer_moving) -> tuple:
+    """
+    Return the (acceleration, wafer) bounds a timing keeping ``share`` of them starts from.
+
+    ``share`` of each, or what the curve already demands where the braking begins
+    (``moving``; ``wafer_moving``, on x and y) if that is more: a time-optimal move is at
+    its limits most of the way, and a bound below where it is would make the timing jerk
+    at once, far over the jerk limit, to get under it. The jerk keeps its share.
+    """
+    accelerations = np.maximum(np.asarray(acceleration, float) * share, moving)
+    wafers = np.asarray(wafer, float) * share   # x, y and |a|
+    moving_wafer = np.append(wafer_moving, np.hypot(*wafer_moving))
+    return accelerations, np.maximum(wafers, moving_wafer)
 
 
 def _coasted(phases: tuple, at: float, coast: float) -> tuple:
@@ -237,14 +256,15 @@ def _path(trajectory: Trajectory, arm, begin: float, end: float) -> tuple:
     return s, breaks, g1, g2, g3, w1, w2
 
 
-def _timing(path: tuple, begin: float, acceleration, jerk, wafer, share: float) -> tuple:
+def _timing(path: tuple, begin: float, acceleration, wafer, jerk) -> tuple:
     """Return ((starts, jerks, states), status: ``RESTED``, ``PAST`` or ``GAVE_UP``)."""
     s, breaks, g1, g2, g3, w1, w2 = path
     starts = np.empty(MAX_STEPS + 1)
     jerks = np.empty(MAX_STEPS)
     states = np.empty((MAX_STEPS + 1, 3))
     count, status = brake(s, breaks, g1, g2, g3, w1, w2,
-                          np.asarray(acceleration, float) * share, jerk * share,
-                          wafer * share, STEP, HALVINGS, begin, starts, jerks, states)
+                          np.asarray(acceleration, float), np.asarray(jerk, float),
+                          np.asarray(wafer, float), STEP, HALVINGS, begin, starts, jerks,
+                          states)
     return (starts[:count + 1].copy(), jerks[:count].copy(),
             states[:count + 1].copy()), int(status)
