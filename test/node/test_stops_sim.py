@@ -1,9 +1,9 @@
 """
-A stop executed: the node and the simulated arm, a loaded move stopped while the arm moves.
+Stops and diverts executed: the node and the simulated arm, a loaded move changed in motion.
 
-The arm (``wafer-sim``) executes the node's trajectories as ``joint_trajectory_controller``
-does; the stop, stamped where it starts, replaces the rest of the move there. What the arm
-did is read back from ``/joint_states`` (100 Hz).
+The arm (``wafer-sim``, a process of its own) executes the node's trajectories as
+``joint_trajectory_controller`` does; a stop or a divert, stamped where it starts, replaces
+the rest of the move there. What the arm did is read back from ``/joint_states`` (100 Hz).
 """
 
 import signal
@@ -58,6 +58,39 @@ def _seconds(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
+def _back_to_start(harness, cell, tag) -> None:
+    """Bring the arm to rest at ``START`` (a case before left it somewhere on its way)."""
+    here = np.array(harness.joint_states[-1].position)
+    if np.abs(here - cell.stations[START].configs[0].q).max() > 1e-9:
+        harness.send_stations({'id': f'back-{tag}', 'from': here.tolist(), 'to': START})
+        assert values(harness.result(f'back-{tag}'))['code'] == 'OK'
+        wait_for(lambda: not np.any(harness.joint_states[-1].velocity) and np.abs(
+            np.array(harness.joint_states[-1].position)
+            - cell.stations[START].configs[0].q).max() < 1e-9, 30.0)
+
+
+def _published(harness, request_id: str):
+    """Return the trajectory published for ``request_id`` (waiting for it)."""
+    wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
+    return next(t for t in harness.trajectories if t.header.frame_id == request_id)
+
+
+def _expected(trajectory, t: np.ndarray) -> tuple:
+    """
+    Return (q, q') of a published trajectory at times t after its start, from its samples.
+
+    Each from the sample at or before it, by its velocity and acceleration (a Taylor step
+    of less than one sample period: off by at most the jerk limit times the step cubed).
+    """
+    times = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
+                      for p in trajectory.points])
+    q, qd, qdd = (np.array([getattr(p, name) for p in trajectory.points])
+                  for name in ('positions', 'velocities', 'accelerations'))
+    k = np.clip(np.searchsorted(times, t, side='right') - 1, 0, len(times) - 1)
+    step = np.clip(t - times[k], 0.0, None)[:, None]
+    return q[k] + qd[k] * step + 0.5 * qdd[k] * step ** 2, qd[k] + qdd[k] * step
+
+
 # Ten moments of the move, from the first a stop request can reach in time (``LEAD`` after
 # the move's answer) to near its end; the core's test stops it from its start on.
 @pytest.mark.parametrize('share', [0.42, 0.47, 0.52, 0.57, 0.63, 0.68, 0.73, 0.79, 0.84, 0.9])
@@ -66,21 +99,13 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     harness = arm_and_node
     robot = default_cell.robot
     request_id = f'go-{share}'
-    # Back to the start first (the previous case stopped the arm somewhere on its way).
-    here = np.array(harness.joint_states[-1].position)
-    if np.abs(here - default_cell.stations[START].configs[0].q).max() > 1e-9:
-        harness.send_stations({'id': f'back-{share}', 'from': here.tolist(), 'to': START})
-        assert values(harness.result(f'back-{share}'))['code'] == 'OK'
-        wait_for(lambda: not np.any(harness.joint_states[-1].velocity) and np.abs(
-            np.array(harness.joint_states[-1].position)
-            - default_cell.stations[START].configs[0].q).max() < 1e-9, 30.0)
+    _back_to_start(harness, default_cell, share)
     # Planned here before the arm moves: planning in this process while it moves would
     # hold up the arm's executor thread (the GIL), as no separate robot is held up.
     move = Planner(default_cell, default_roadmap).plan(START, GOAL).trajectory
     harness.send_stations({'id': request_id, 'from': START, 'to': GOAL})
     assert values(harness.result(request_id))['code'] == 'OK'
-    wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
-    sent = next(t for t in harness.trajectories if t.header.frame_id == request_id)
+    sent = _published(harness, request_id)
     began = _seconds(sent.header.stamp)
     assert float(values(harness.result(request_id))['cycle_time']) == move.duration
     at = max(share * move.duration, time.time() - began + LEAD)
@@ -151,3 +176,49 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     # its jerk jumps between them: by less than the jerk limit times a step cubed.
     before = (t > 0.25) & (t < at)  # once the arm follows it (it may come late: above)
     assert np.abs(q[before] - move.evaluate(t[before])).max() < limits.jerk.max() * 0.01 ** 3
+
+
+def test_a_moving_arm_diverted_follows_the_move_then_the_divert_without_a_jump(
+        arm_and_node, default_cell):
+    harness = arm_and_node
+    limits = default_cell.robot.limit_set.joints
+    _back_to_start(harness, default_cell, 'divert')
+    harness.send_stations({'id': 'go-divert', 'from': START, 'to': GOAL})
+    assert values(harness.result('go-divert'))['code'] == 'OK'
+    sent = _published(harness, 'go-divert')
+    began = _seconds(sent.header.stamp)
+    at = time.time() - began + LEAD
+    harness.send_stations({'id': 'divert', 'from': {'trajectory': 'go-divert', 'at': at},
+                           'to': 'loadlock1'})
+    result = harness.result('divert')
+    assert values(result)['code'] == 'OK', result.message
+    assert values(result)['method'] == 'stop-then-move'
+    diverted = _published(harness, 'divert')
+    assert time.time() < began + at, 'the divert came after the moment it leaves the move at'
+    assert _seconds(diverted.header.stamp) == pytest.approx(began + at, abs=1e-6)
+    duration = float(values(result)['cycle_time'])
+    wait_for(lambda: _seconds(harness.joint_states[-1].header.stamp) > began + at + duration
+             + 0.1, 30.0)
+    executed = [m for m in harness.joint_states
+                if began + at - 0.2 <= _seconds(m.header.stamp) <= began + at + duration + 0.1]
+    t = np.array([_seconds(m.header.stamp) for m in executed]) - began
+    q = np.array([m.position for m in executed])
+    qd = np.array([m.velocity for m in executed])
+    assert (np.abs(t - at) < 0.1).sum() >= 3
+    # The move until ``at``, the divert from there: position and velocity each within the
+    # controller's quintic between the 10 ms samples of the curve (the jerk limit times a
+    # step cubed, squared), so nothing jumps where one replaces the other.
+    later = t >= at
+    moving = _expected(sent, t)
+    diverting = _expected(diverted, np.maximum(t - at, 0.0))
+    expected_q = np.where(later[:, None], diverting[0], moving[0])
+    expected_qd = np.where(later[:, None], diverting[1], moving[1])
+    assert np.abs(q - expected_q).max() < limits.jerk.max() * 0.01 ** 3
+    assert np.abs(qd - expected_qd).max() < limits.jerk.max() * 0.01 ** 2
+    dt = np.diff(t)[:, None]
+    assert np.all(np.abs(np.diff(qd, axis=0)) / dt <= limits.acceleration * (1 + 1e-3))
+    assert np.all(np.abs(qd) <= limits.velocity * (1 + 1e-9))
+    # At rest at the new station.
+    assert not np.any(qd[-1])
+    assert any(np.abs(q[-1] - config.q).max() < 1e-9
+               for config in default_cell.stations['loadlock1'].configs)
