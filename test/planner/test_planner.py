@@ -76,7 +76,13 @@ def test_random_free_start_goal_pairs_pass_the_independent_check(cell, planner):
 def test_result_carries_samples_metrics_and_stage_timings(default_cell, default_roadmap):
     planner = Planner(default_cell, default_roadmap, PlannerSettings(sample_period=0.02))
     result = planner.plan('loadport2', 'loadlock2')
-    assert np.allclose(np.diff(result.times[:-1]), 0.02)
+    # Every 0.02 s and at every break of the curve (nothing nearer a break than 1 ms).
+    breaks = result.trajectory.covering_breaks()[1:-1]
+    assert set(breaks) <= set(result.times)
+    grid = result.times[~np.isin(result.times, breaks)][:-1]
+    assert np.allclose(grid / 0.02, np.round(grid / 0.02), rtol=0, atol=1e-9)
+    assert np.abs(grid[:, None] - breaks[None, :]).min() >= 1e-3
+    assert len(grid) + len(breaks) >= np.floor(result.cycle_time / 0.02)
     assert result.times[-1] == result.cycle_time
     assert np.array_equal(result.positions[-1], result.goal_q)
     assert set(STAGES) | set(PARTS) | {'total'} == set(result.timings_ms)
@@ -350,3 +356,28 @@ def test_a_whole_curve_answer_is_never_slower_than_its_lambda_scaled_start(
     result = planner.plan('loadport2', 'loadlock2', branches=(1, 1))
     assert result.verification.ok and 'coarse_cycle_time' not in result.metrics
     assert result.cycle_time <= result.initial_cycle_time
+
+
+def test_a_controller_joining_the_samples_by_quintics_follows_the_curve_exactly(
+        default_cell, default_roadmap):
+    """Sampled at its breaks too, a move is what joint_trajectory_controller executes."""
+    from wafer_planner_ros.service.execution import samples_of, TrajectoryFollower
+    from wafer_planner_ros.trajectory.constraints import limit_constraints, state_ratios
+    from wafer_planner_ros.trajectory.constraints import States
+    robot = default_cell.robot
+    result = Planner(default_cell, default_roadmap).plan('loadport3', 'loadlock2')
+    curve = result.trajectory
+    follower = TrajectoryFollower(robot, result.start_q)
+    follower.replace(0.0, samples_of(robot.joint_names, robot.joint_names, result.times,
+                                     result.positions, result.velocities,
+                                     result.accelerations), 0.0)
+    t = np.linspace(0.0, curve.duration, int(curve.duration / 1e-4) + 1)
+    q, qd, qdd = follower.state(t)
+    assert np.abs(q - curve.evaluate(t)).max() < 1e-9
+    jerk = np.gradient(qdd, t, axis=0)
+    executed = state_ratios(limit_constraints(robot.limit_set), States(
+        t, q, qd, qdd, jerk, robot.arm.wafer_acceleration(q, qd, qdd)))
+    # Sampled every 10 ms alone, this move's executed wafer acceleration reached 1.011 x
+    # its limit and its jerk 1.33 x; the jerk here from differences (a jump counts).
+    assert executed['wafer_x'] <= 1.0 and executed['wafer_y'] <= 1.0
+    assert executed['jerk'] <= 1.0 + 1e-3

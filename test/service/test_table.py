@@ -9,6 +9,7 @@ import time
 from independent import check
 import numpy as np
 import pytest
+from sampling import sampled_every
 from tampered import digest, tamper
 
 from wafer_planner_ros.cell.limits import EMPTY, LOADED
@@ -88,8 +89,8 @@ def test_a_stored_table_loads_to_the_same_answers(planner, built, tmp_path):
     # Another sample period shares the table; other planner settings do not.
     other = Planner(planner.cell, planner.roadmap, PlannerSettings(sample_period=0.02))
     assert table_key(other) == table_key(planner)
-    assert np.allclose(np.diff(load_table(other, tmp_path).answer(
-        other, 'loadport1', 'loadlock1').times[:-1]), 0.02)
+    assert sampled_every(load_table(other, tmp_path).answer(
+        other, 'loadport1', 'loadlock1').times, 0.02)
     paper = Planner(planner.cell, planner.roadmap, PlannerSettings.paper())
     with pytest.raises(TableError, match='no table file'):
         load_table(paper, tmp_path)
@@ -184,7 +185,7 @@ def test_the_service_answers_from_its_table_once_it_is_set(planner, built):
     assert coarse.table is built and coarse.budget == 0.3
     answer = coarse.answer('loadport1', 'loadlock1')
     assert answer.metrics['source'] == 'table'
-    assert np.allclose(np.diff(answer.times)[:-1], 0.05)
+    assert sampled_every(answer.times, 0.05)
 
 
 def test_a_table_missing_pairs_is_completed_a_colliding_curve_rejected(

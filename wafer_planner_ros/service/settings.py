@@ -46,7 +46,8 @@ PARAMETERS: Tuple[Parameter, ...] = (
     Parameter('roadmap.cache_dir', str(DEFAULT_CACHE_DIR),
               'roadmap cache directory; empty disables the cache'),
     Parameter('trajectory.sample_period', 0.01,
-              'seconds between the published trajectory points (the end is added)',
+              'seconds between the published trajectory points (the breaks of the curve '
+              'and its end are added)',
               *SAMPLE_PERIOD_RANGE),
     Parameter('planning.timeout', 2.0,
               'seconds from receipt after which a request is answered TIMEOUT', 0.01, 600.0),

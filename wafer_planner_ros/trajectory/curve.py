@@ -15,6 +15,10 @@ from typing import ClassVar, Dict, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 
+BREAK_GAP = 1e-3
+"""s: the least time between a break and a time of the sampling grid kept beside it."""
+SAME_TIME = 1e-9
+"""s: sample times nearer than this are one."""
 UNNAMED_KIND = 'cubic-b-spline'
 """The kind of a description that names none (written before kinds were named)."""
 
@@ -129,8 +133,28 @@ class Trajectory(ABC):
         return boundaries, self.peak_speed(boundaries[:-1], boundaries[1:])
 
     def samples(self, period: float) -> Tuple[np.ndarray, ...]:
-        """Return (times, q, q', q''): every ``period`` seconds from 0, then the exact end."""
-        times = np.append(np.arange(0.0, self.duration - 1e-9, period), self.duration)
+        """
+        Return (times, q, q', q''): every ``period`` s from 0, at each break, the exact end.
+
+        At the curve's breaks too (``covering_breaks``: where its jerk jumps), so that a
+        controller that joins the samples by quintics (``joint_trajectory_controller``)
+        follows each of the curve's pieces of degree five or less exactly, never a quintic
+        across a jump of the jerk (with samples every 10 ms alone that left the curve by
+        up to 2e-7 rad, the wafer limit by up to 1.1 % and the jerk limit by up to 58 % on
+        the default cell's moves). A time of the grid nearer a break than ``BREAK_GAP``
+        gives way to it; breaks nearer each other than ``SAME_TIME`` count as one.
+        """
+        duration = self.duration
+        grid = np.arange(0.0, duration - 1e-9, period)
+        breaks = self.covering_breaks()[1:-1]
+        if len(breaks):
+            after = np.clip(np.searchsorted(breaks, grid), 0, len(breaks) - 1)
+            before = np.clip(after - 1, 0, len(breaks) - 1)
+            nearest = np.minimum(np.abs(grid - breaks[after]), np.abs(grid - breaks[before]))
+            grid = grid[(nearest >= min(BREAK_GAP, 0.5 * period)) | (grid == 0.0)]
+        times = np.unique(np.concatenate([grid, breaks, [duration]]))
+        times = times[np.concatenate([[True], np.diff(times) > SAME_TIME])]
+        times[-1] = duration
         return (times, *self.evaluate_orders(times))
 
     @abstractmethod
