@@ -22,15 +22,11 @@ ours (median, p99, max) and of the move from rest. Writes ``bench/results/divert
 Run: ``python bench/bench_divert.py [--moments 5] [--moves N]``.
 """
 
-import argparse
-import json
-import os
 from pathlib import Path
-import platform
 import sys
 import time
 
-from bench_stop import _stats, head_commit  # bench/: this script's folder is on the path
+from bench_stop import _stats, arguments, written  # bench/: this folder is on the path
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
@@ -99,10 +95,7 @@ def _line(name: str, s: dict) -> str:
 
 def main() -> int:
     """Run the benchmark."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
-    parser.add_argument('--moments', type=int, default=5, help='moments per move')
-    parser.add_argument('--moves', type=int, default=None, help='only the first N moves')
-    args = parser.parse_args()
+    args = arguments(__doc__, 5)
     cell = Cell.from_yaml(default_cell_path())
     planner = Planner(cell, load_or_build(cell).roadmap, PlannerSettings(method=WholeCurve))
     warm = planner.plan('loadport2', 'loadlock2')  # warm-up: imports, caches, kernels
@@ -131,15 +124,10 @@ def main() -> int:
           f"max {overall['ratio']['max']:.3f}; planning median {overall['ms']['median']:.0f} "
           f"ms, p99 {overall['ms']['p99']:.0f} ms; methods {overall['methods']}; every one "
           f"verified: {overall['all_verified']}; errors {overall['errors']}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({
-        'benchmark': 'diverted moves on the default cell (roadmap seed 0, whole-curve, '
-                     'loaded) against the move from rest at the same point',
-        'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
-                    'platform': platform.platform(), 'commit': head_commit()},
-        'moments_per_move': args.moments, 'summary': overall, 'moves': summaries,
-        'rows': rows}, indent=1) + '\n')
-    print(f'written {RESULTS}', file=sys.stderr)
+    written(RESULTS, 'diverted moves on the default cell (roadmap seed 0, whole-curve, '
+            'loaded) against the move from rest at the same point',
+            {'moments_per_move': args.moments, 'summary': overall, 'moves': summaries,
+             'rows': rows})
     return 0
 
 

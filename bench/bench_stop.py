@@ -395,12 +395,28 @@ def _line(name: str, s: dict) -> str:
             f"{ms['max']:>7.1f}")
 
 
+def written(path: Path, benchmark: str, results: dict) -> None:
+    """Write a benchmark's results as JSON, with the machine and commit they come from."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({
+        'benchmark': benchmark,
+        'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
+                    'platform': platform.platform(), 'commit': head_commit()},
+        **results}, indent=1) + '\n')
+    print(f'written {path}', file=sys.stderr)
+
+
+def arguments(doc: str, moments: int):
+    """Return the command line of a benchmark of moves changed in motion (``--moments``)."""
+    parser = argparse.ArgumentParser(description=doc.split('\n')[1])
+    parser.add_argument('--moments', type=int, default=moments, help='moments per move')
+    parser.add_argument('--moves', type=int, default=None, help='only the first N moves')
+    return parser.parse_args()
+
+
 def main() -> int:
     """Run the benchmark."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
-    parser.add_argument('--moments', type=int, default=20, help='moments per move')
-    parser.add_argument('--moves', type=int, default=None, help='only the first N moves')
-    args = parser.parse_args()
+    args = arguments(__doc__, 20)
     cell = Cell.from_yaml(default_cell_path())
     robot = cell.robot
     checks = check_constant_bounds(robot)
@@ -449,16 +465,10 @@ def main() -> int:
           f"floor median {s['floor_ratio']['median']:.3f} (braked "
           f"{s['floor_ratio_braked']['median']:.3f}); 'rest' {s['rest_share']:.1%}; "
           f"errors {s['errors']}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({
-        'benchmark': 'controlled stops on the default cell (roadmap seed 0, whole-curve, '
-                     'loaded) against the time-optimal stop on the same path without jerk',
-        'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
-                    'platform': platform.platform(), 'commit': head_commit()},
-        'grid_s': GRID, 'moments_per_move': args.moments, 'target': TARGET,
-        'checks': checks, 'summary': overall, 'moves': summaries, 'rows': rows},
-        indent=1) + '\n')
-    print(f'written {RESULTS}', file=sys.stderr)
+    written(RESULTS, 'controlled stops on the default cell (roadmap seed 0, whole-curve, '
+            'loaded) against the time-optimal stop on the same path without jerk',
+            {'grid_s': GRID, 'moments_per_move': args.moments, 'target': TARGET,
+             'checks': checks, 'summary': overall, 'moves': summaries, 'rows': rows})
     return 0
 
 
