@@ -122,8 +122,9 @@ class Replayer:
                 kept = self._answers.get(request.start.trajectory)
                 if kept is None:
                     return self._unknown(request.start.trajectory)
-                result = planner.divert(kept[1].trajectory, request.start.at, request.goal,
-                                        request.start.trajectory, request.load)
+                result = PlanningService(planner).divert(
+                    kept[1].trajectory, request.start.at, request.goal,
+                    request.start.trajectory, load=request.load)
             else:
                 result = PlanningService(planner).answer(request.start, request.goal,
                                                          load=request.load)

@@ -70,12 +70,13 @@ class Stops:
             while len(self._kept) > KEPT:
                 self._kept.popitem(last=False)
 
-    def divert(self, planner, request, deadline: float, budget: float) -> tuple:
+    def divert(self, service, request, deadline: float) -> tuple:
         """
         Return (answer, stamp) of a plan request whose start is in motion (``Moving``).
 
-        The move leaves the kept trajectory it names at its moment (``Planner.divert``),
-        planned on ``planner`` within ``budget`` s; stamped when it starts, as a stop is.
+        The move leaves the kept trajectory it names at its moment, planned by ``service``
+        as any request it answers (``PlanningService.divert``: within its budget); stamped
+        when it starts, as a stop is.
         Raise PlanningError: ``UNKNOWN_TRAJECTORY`` for a trajectory not kept,
         ``INVALID_REQUEST`` for another load than the trajectory's, else as
         ``Planner.divert`` does.
@@ -93,8 +94,8 @@ class Stops:
             raise PlanningError(ErrorCode.INVALID_REQUEST,
                                 f'{moving.trajectory!r} moves {result.load}: a move left in '
                                 f'motion keeps its load, not {request.load}')
-        return planner.divert(result.trajectory, moving.at, request.goal, moving.trajectory,
-                              request.load, deadline, budget or None), later(stamp, moving.at)
+        return service.divert(result.trajectory, moving.at, request.goal, moving.trajectory,
+                              deadline, request.load), later(stamp, moving.at)
 
     def enqueue(self, number: int, request, received: float) -> None:
         """Queue a stop request (``service.requests.StopRequest``) received at ``received``."""

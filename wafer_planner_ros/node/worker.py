@@ -335,8 +335,7 @@ class PlanningWorker:
             begun = time.monotonic()
             try:
                 if isinstance(request.start, Moving):
-                    result, stamp = self.stops.divert(service.planner, request, deadline,
-                                                      settings.optimise_budget)
+                    result, stamp = self.stops.divert(service, request, deadline)
                 else:
                     result, stamp = service.answer(request.start, request.goal, deadline,
                                                    request.load), None

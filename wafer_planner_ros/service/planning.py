@@ -110,17 +110,39 @@ class PlanningService:
         table = self._holding(start, goal, load)
         if table is not None:
             return table.answer(self.planner, start, goal)
+        planner, budget = self._budgeted(deadline)
+        if budget is not None:
+            self._lend_transfer(start, goal, load)
+        return _named(planner.plan(start, goal, deadline=deadline, budget=budget, load=load),
+                      budget)
+
+    def divert(self, trajectory, at: float, goal, label: str,
+               deadline: Optional[float] = None, load: str = LOADED) -> PlanResult:
+        """
+        Return the move from ``trajectory`` in motion at ``at`` to ``goal`` (``Planner.divert``).
+
+        Its move from where the stop rests is planned as a request for joint angles is: with
+        the budget by the whole-curve optimisation, or without by ``planner`` (the module).
+        """
+        planner, budget = self._budgeted(deadline)
+        return _named(planner.divert(trajectory, at, goal, label, load, deadline, budget),
+                      budget)
+
+    def _budgeted(self, deadline: Optional[float]) -> tuple:
+        """
+        Return (planner, budget s or None) for a request that no table answers (the module).
+
+        Without a budget: ``planner``, None; with one: the whole-curve planner and the budget
+        (never more than half of what is left before ``deadline``), or the corridor curve's
+        planner and None where that leaves less than ``MIN_BUDGET``.
+        """
         if self.budget is None:
-            return self.planner.plan(start, goal, deadline=deadline, load=load)
+            return self.planner, None
         budget = self.budget if deadline is None else \
             min(self.budget, 0.5 * (deadline - time.monotonic()))
         if budget < MIN_BUDGET:
-            return _with_method(self.planner, KnotTiming).plan(start, goal, deadline=deadline,
-                                                               load=load)
-        self._lend_transfer(start, goal, load)
-        result = whole_curve(self.planner).plan(start, goal, deadline=deadline, budget=budget,
-                                                load=load)
-        return replace(result, metrics=dict(result.metrics, budget=budget))
+            return _with_method(self.planner, KnotTiming), None
+        return whole_curve(self.planner), budget
 
     def _lend_transfer(self, start, goal, load: str) -> None:
         """
@@ -139,6 +161,12 @@ class PlanningService:
         if table is not None:
             planner = whole_curve(self.planner).for_load(load)
             planner.keep(table.answer(planner, *pair))
+
+
+def _named(result: PlanResult, budget: Optional[float]) -> PlanResult:
+    """Return a result that says the budget it was planned within (when it had one)."""
+    return result if budget is None else replace(result,
+                                                 metrics=dict(result.metrics, budget=budget))
 
 
 def whole_curve(planner: Planner) -> Planner:
