@@ -22,6 +22,9 @@ once):
   than the optimum. A budget below ``MIN_BUDGET`` (or 0) gives
   the corridor curve, which takes milliseconds.
 
+``divert`` answers a move left in motion (``Planner.divert``) by the same policy: the move
+from where its controlled stop rests is planned as a request for joint angles is.
+
 A budgeted answer names its budget (``metrics['budget']``). Its cycle time depends on how
 fast the machine was, so a replay cannot reproduce it: ``within_budget`` tells such answers
 from the record of a query.
