@@ -6,7 +6,8 @@ optimiser unbudgeted against the loaded limit set: every station pair (``station
 and every ``<loadport>:inside`` -> ``<loadlock>:inside`` move through the ports and back.
 At 20 moments of each move, evenly spaced strictly inside (0, T) (k T / 21, k = 1..20):
 
-- ours: ``Planner.stop(move, at)``, verified as every answer is: its duration, its wafer
+- ours: ``Planner.stop(move, at)``, verified as every answer is (given the move's
+  verification, as the node holds it for what it published): its duration, its wafer
   travel (the length of the wafer centre's path during the stop, sampled every 0.5 ms),
   'braked' or 'rest' (no braked timing kept the limits: the rest of the move is the stop),
   its planning ms (stop, verify, total);
@@ -309,12 +310,16 @@ def moves_of(cell) -> list:
     return moves
 
 
-def stop_row(planner, move, at: float, rows, label: str) -> dict:
-    """Return one moment's figures: our stop, the reference, the hold."""
+def stop_row(planner, move, at: float, rows, label: str, verified=None) -> dict:
+    """
+    Return one moment's figures: our stop, the reference, the hold.
+
+    ``verified``: the move's verification, as the node holds it for the moves it answered.
+    """
     robot = planner.cell.robot
     row = {'at': at, 'rest_of_move': move.duration - at}
     try:
-        result = planner.stop(move, at, label)
+        result = planner.stop(move, at, label, verified=verified)
     except PlanningError as exc:
         row.update(error=f'{exc.code.name}: {exc.message}')
         return row
@@ -431,12 +436,13 @@ def main() -> int:
     for kind, start, goal in moves_of(cell)[:args.moves]:
         name = f'{start}->{goal}'
         try:
-            move = planner.plan(start, goal).trajectory
+            planned = planner.plan(start, goal)
         except PlanningError as exc:
             rows.append({'kind': kind, 'from': start, 'to': goal,
                          'error': f'{exc.code.name}: {exc.message}'})
             print(f'{name}: {exc.code.name}', file=sys.stderr)
             continue
+        move = planned.trajectory
         duration = move.duration
         moments = [k * duration / (args.moments + 1) for k in range(1, args.moments + 1)]
         grid = path_grid(duration, moments)
@@ -447,7 +453,8 @@ def main() -> int:
         for k, at in enumerate(moments, 1):
             row = {'kind': kind, 'from': start, 'to': goal, 'duration_of_move': duration,
                    'moment': k, 'rows_ms': rows_ms}
-            row.update(stop_row(planner, move, at, table, f'{name} ({k}/{args.moments + 1})'))
+            row.update(stop_row(planner, move, at, table, f'{name} ({k}/{args.moments + 1})',
+                                planned.verification))
             mine.append(row)
         rows += mine
         summaries[name] = summary_of(mine)

@@ -11,9 +11,11 @@ import pytest
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
 from wafer_planner_ros.trajectory.methods import WholeCurve
+from wafer_planner_ros.trajectory.retimed import Retimed
 from wafer_planner_ros.trajectory.stopping import hold_demand
-from wafer_planner_ros.trajectory.verify import verify
+from wafer_planner_ros.trajectory.verify import Verification, verify
 
 STEP = 1e-4
 """s between the independent checks."""
@@ -129,12 +131,43 @@ def test_a_stop_verified_as_starting_at_rest_or_in_another_motion_fails(planner,
     assert verify(curve, planner.cell, q, end, moving=(qd, qdd)).ok
 
 
-@pytest.mark.parametrize('pair', [('loadport3', 'loadlock1'), ('loadlock2', 'loadport1')])
-def test_a_stop_that_follows_the_move_first_starts_exactly_in_its_state(planner, pair):
+def test_a_stop_of_a_verified_move_is_verified_on_its_path_and_in_its_own_limits(
+        planner, moves):
+    # Given the move's verification, the stop takes its path's proof from it and checks
+    # its own limits and ends: a timing that breaks a limit still fails.
+    result = moves['station']
+    move, at = result.trajectory, 0.4 * result.trajectory.duration
+    stop = planner.stop(move, at, 'r1', verified=result.verification)
+    whole = planner.stop(move, at, 'r1')
+    assert stop.verification.ok and stop.verification.on_base
+    assert not whole.verification.on_base
+    assert stop.verification.proof is result.verification.proof
+    assert stop.verification.min_clearance == result.verification.min_clearance
+    assert stop.verification.ratios == pytest.approx(whole.verification.ratios)
+    curve, cell = stop.trajectory, planner.cell
+    qd, qdd = (x[0] for x in move.evaluate_orders([at], (1, 2)))
+    timing = curve.timing
+    harder = Retimed(move, JerkProfile(timing.starts / 1.2, timing.jerks * 1.2 ** 3,
+                                       timing.states * [1.0, 1.2, 1.2 ** 2]))
+    checked = verify(harder, cell, stop.start_q, harder.evaluate([harder.duration])[0],
+                     moving=(qd * 1.2, qdd * 1.2 ** 2), base=result.verification)
+    assert not checked.ok and any('jerk' in p for p in checked.problems)
+    # Only a retimed curve follows a path, and only a proven one.
+    with pytest.raises(ValueError):
+        verify(move, cell, result.start_q, result.goal_q, base=result.verification)
+    with pytest.raises(ValueError):
+        verify(curve, cell, stop.start_q, stop.goal_q, moving=(qd, qdd),
+               base=Verification(problems=('not proven',)))
+
+
+@pytest.mark.parametrize('pair, fraction', [(('loadport3', 'loadlock1'), 6 / 40),
+                                            (('loadlock2', 'loadport1'), 12 / 40)])
+def test_a_stop_that_follows_the_move_first_starts_exactly_in_its_state(planner, pair,
+                                                                        fraction):
     # At these moments no braking at once keeps the limits: the stop follows the move a
     # little first (its start computed from the moment itself, not back from the braking).
     move = planner.plan(*pair).trajectory
-    at = 5.0 * move.duration / 11.0
+    at = fraction * move.duration
     stop = planner.stop(move, at, 'r1')
     assert stop.verification.ok and stop.metrics['timing'] == 'braked'
     assert stop.trajectory.timing.jerks[0] == 0.0  # following the move

@@ -61,7 +61,7 @@ def stop_one(planner, result, at: float, info, joint_names) -> tuple:
     """
     label = f'{result.start.label} -> {result.goal.label}'
     try:
-        stopped = planner.stop(result.trajectory, at, label)
+        stopped = planner.stop(result.trajectory, at, label, verified=result.verification)
     except PlanningError as exc:
         return None, error_json(exc.code.value, exc.message, f'{label} at {at} s', 'rest',
                                 info, planner.load)

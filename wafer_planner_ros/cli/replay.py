@@ -156,7 +156,7 @@ class Replayer:
         planner, move = kept
         try:
             stopped = planner.stop(move.trajectory, request.at, request.trajectory,
-                                   move.load)
+                                   move.load, move.verification)
         except PlanningError as exc:
             return exc.code.value, None
         self._answers[request.request_id] = (planner, stopped)

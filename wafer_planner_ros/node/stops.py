@@ -140,7 +140,7 @@ class Stops:
         begun = time.monotonic()
         try:
             stopped = planner.stop(result.trajectory, request.at, request.trajectory,
-                                   result.load)
+                                   result.load, result.verification)
         except PlanningError as exc:
             self._answer_error(number, request.request_id, exc.code, exc.message, label,
                                'rest', (time.monotonic() - begun) * 1e3, roadmap)

@@ -118,17 +118,18 @@ class Planner:
         return through(self, a, b, deadline, None, begun, blend=False)
 
     def stop(self, trajectory, at: float, label: str = 'the move',
-             load: Optional[str] = None) -> PlanResult:
+             load: Optional[str] = None, verified=None) -> PlanResult:
         """
         Return the controlled stop of ``trajectory`` from ``at`` s on its path (``stop``).
 
         ``load``: the limit set it keeps (None: this planner's); a stop keeps the set the
-        move was planned against. Raises PlanningError: OUTSIDE_TRAJECTORY, AT_REST or
-        VERIFICATION_FAILED.
+        move was planned against. ``verified``: the verification the move passed when it
+        was answered, held since (``stop.stop``). Raises PlanningError: OUTSIDE_TRAJECTORY,
+        AT_REST or VERIFICATION_FAILED.
         """
         if load is not None and load != self.load:
-            return self.for_load(load).stop(trajectory, at, label)
-        return stop(self, trajectory, at, label)
+            return self.for_load(load).stop(trajectory, at, label, verified=verified)
+        return stop(self, trajectory, at, label, verified)
 
     def divert(self, trajectory, at: float, goal, label: str = 'the move',
                load: Optional[str] = None, deadline: Optional[float] = None,

@@ -12,13 +12,14 @@ the goal, as one trajectory (``chained.Chained``), verified whole; its ``metrics
 """
 
 import time
+from typing import Optional
 
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner.endpoints import Endpoint
 from wafer_planner_ros.planner.result import answer, PlanResult
 from wafer_planner_ros.trajectory.chained import Chained
 from wafer_planner_ros.trajectory.stopping import controlled_stop, moving_state
-from wafer_planner_ros.trajectory.verify import verify
+from wafer_planner_ros.trajectory.verify import Verification, verify
 
 METHOD = 'controlled-stop'
 """The method a stop's answer names."""
@@ -26,13 +27,18 @@ DIVERT = 'stop-then-move'
 """The method a diverted move's answer names: its stop, then the move from rest."""
 
 
-def stop(planner, trajectory, at: float, label: str) -> PlanResult:
+def stop(planner, trajectory, at: float, label: str,
+         verified: Optional[Verification] = None) -> PlanResult:
     """
     Return the verified controlled stop of ``trajectory`` from ``at`` (the module).
 
-    ``label``: what the stopped move is called in the answer (e.g. its request id). Raise
-    PlanningError: OUTSIDE_TRAJECTORY or AT_REST (``stopping.moving_state``),
-    VERIFICATION_FAILED if the stop fails its verification.
+    ``label``: what the stopped move is called in the answer (e.g. its request id).
+    ``verified``: the verification ``trajectory`` passed when it was answered, held since
+    (never one read back from a file): the stop keeps its path, so the stop's verification
+    checks its limits and ends and takes the path's proof from it (``verify``'s ``base``);
+    None (or one without a proven path): the stop is verified whole. Raise PlanningError:
+    OUTSIDE_TRAJECTORY or AT_REST (``stopping.moving_state``), VERIFICATION_FAILED if the
+    stop fails its verification.
     """
     begun = time.perf_counter()
     q, qd, qdd = moving_state(trajectory, at)
@@ -40,7 +46,8 @@ def stop(planner, trajectory, at: float, label: str) -> PlanResult:
     curve = made.trajectory
     end = curve.evaluate([curve.duration])[0]
     checked = time.perf_counter()
-    verification = verify(curve, planner.cell, q, end, moving=(qd, qdd))
+    base = verified if verified is not None and verified.proven else None
+    verification = verify(curve, planner.cell, q, end, moving=(qd, qdd), base=base)
     if not verification.ok:
         raise PlanningError(ErrorCode.VERIFICATION_FAILED,
                             f'the stop of {label} at {at:.6g} s failed its verification: '

@@ -9,16 +9,20 @@ between samples), held within the deceleration the acceleration limits leave at 
 middle and end, as long as easing off from the step's end (a constant jerk bringing sigma'
 and sigma'' to zero together, ``easing``) would still keep the jerk limits all the way to
 rest (``eases``); where the hardest would not, the hardest that does; then it eases off.
-Steps end at the curve's breaks (``aligned``), where its higher derivatives jump, so that
-the limits are checked on each side of every jump. Plain arithmetic, compiled by numba.
+Where easing off stops keeping the limits is searched for among the hardest steps made
+ahead (by doubling, then bisection): each try walks to rest, and trying after every step
+made a stop's cost grow with the square of its steps. Steps end at the curve's breaks
+(``aligned``), where its higher derivatives jump, so that the limits are checked on each
+side of every jump. Plain arithmetic, compiled by numba.
 """
 
 import numpy as np
 
 from wafer_planner_ros.kernels import kernel
 
-RESTED, PAST, GAVE_UP = 1, 0, -1
-"""How a braking ended: at rest, past the path's samples, or with no way to rest."""
+RESTED, PAST, GAVE_UP, MORE = 1, 0, -1, 2
+"""How a braking ended: at rest, past the path's samples, or with no way to rest (and,
+while its steps are made ahead, ``MORE``: not yet)."""
 REST_SPEED = 1e-9
 """sigma' at most this with nothing left to ease off is rest (rounding)."""
 TOLERANCE = 1e-9
@@ -164,83 +168,202 @@ def eases(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, s, 
 
 
 @kernel(nogil=True)
+def hardest(grid, g1, g2, g3, w1, w2, acceleration, jerk, wafer, s, v, u, h):
+    """
+    Return (the hardest braking jerk, the most) for a step of ``h`` s from (s, v, u).
+
+    The hardest: the least jerk the jerk limits allow, held within the deceleration the
+    acceleration limits leave at the step's middle and end (where the limits along the path
+    turn, an end alone lets the middle pass them). The most: the most jerk the jerk limits
+    allow. (nan, nan) past the samples.
+    """
+    ulo, uhi, jlo, jhi = bounds(grid, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                                s, v, u, h)
+    if np.isnan(ulo):
+        return np.nan, np.nan
+    least, most = -np.inf, np.inf
+    for part in (0.5, 1.0):
+        c = part * h
+        s1, v1, _ = advance(s, v, u, jlo, c)
+        lo1, hi1, _, _ = bounds(grid, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                                s1, v1, u, 0.0)
+        if not np.isnan(lo1):
+            least = max(least, (lo1 - u) / c)
+            most = min(most, (min(hi1, 0.0) - u) / c)
+    return min(max(jlo, least), most, jhi), jhi
+
+
+@kernel(nogil=True)
+def eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, states,
+               k):
+    """Return whether easing off from ``states[k]`` keeps every limit (moving there)."""
+    s, v, u = states[k, 0], states[k, 1], states[k, 2]
+    return v > 0.0 and eases(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                             step, s, v, u)
+
+
+@kernel(nogil=True)
 def brake(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, halvings,
-          begin, starts, jerks, states):
+          begin, horizon, starts, jerks, states):
     """
     Fill the stop's phases from (begin, 1, 0); return (phases, how it ended).
 
-    How it ended: ``RESTED``, ``PAST`` the samples, or ``GAVE_UP``.
+    How it ended: ``RESTED``, ``PAST`` the samples, or ``GAVE_UP`` (no way to rest, or
+    still braking ``horizon`` s after ``begin``: a stop that would rest later is not wanted).
 
-    Each step of ``step`` s brakes with the hardest jerk the jerk limits allow, held within
-    the deceleration the acceleration limits leave at the step's end, as long as easing off
+    Each step of ``step`` s brakes with the hardest jerk (``hardest``) as long as easing off
     from the step's end still keeps every limit (``eases``); where it would not, the
     hardest braking that does (halving); once none does, easing off begins where it
-    still did (braking on while it has not yet: at first, with no
-    deceleration, there is nothing to ease off), its jerk constant, its last step as
-    long as it takes.
+    still did (braking on while it has not yet: at first, with no deceleration, there is
+    nothing to ease off), its jerk constant, its last step as long as it takes.
+
+    Where easing off stops keeping the limits is searched for, not tried after every step
+    (each try is a walk to rest): the hardest steps are made ahead as the search needs
+    them, easing off is tried from the ends of the steps 1, 2, 4, 8, ... after the first
+    where it keeps the limits, and the first where it does not is found between the last
+    two tried by bisection. Where the tries keep the limits up to a step and no further,
+    that is the step trying every one finds; otherwise it is a later one, from which
+    easing off keeps them as well.
     """
-    s, v, u = begin, 1.0, 0.0
-    t = 0.0
     starts[0] = 0.0
-    states[0, 0], states[0, 1], states[0, 2] = s, v, u
+    states[0, 0], states[0, 1], states[0, 2] = begin, 1.0, 0.0
     n = 0
-    easing_off = False
-    can_ease = False  # whether easing off from the current state keeps every limit
-    while n < len(jerks):
+    can_ease = False  # whether easing off from states[n] keeps every limit
+    while True:
+        made, ended = n, MORE
+        # The first state from which easing off keeps the limits (searched for like the
+        # last, below: at the steps 1, 2, 4, ... after n, then by bisection).
+        first = n
+        if not can_ease:
+            before, gap = n, 1
+            while True:
+                made, ended = _ahead(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk,
+                                     wafer, step, horizon, starts, jerks, states, made,
+                                     ended, before + gap)
+                first = min(before + gap, made)
+                if first == before:
+                    first = made + 1  # from no state made
+                    break
+                if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk,
+                              wafer, step, states, first):
+                    break
+                before, gap = first, 2 * gap
+            while first <= made and first - before > 1:
+                middle = (before + first) // 2
+                if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                              step, states, middle):
+                    first = middle
+                else:
+                    before = middle
+        if first > made:
+            if ended != RESTED:
+                return made, ended  # past the samples or out of room, still braking
+            # Easing off kept the limits from no state before the speed would reach zero.
+            return made, GAVE_UP
+        # The last state from which easing off keeps the limits: states[good].
+        good, bad, gap = first, -1, 1
+        while bad < 0:
+            made, ended = _ahead(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk,
+                                 wafer, step, horizon, starts, jerks, states, made,
+                                 ended, good + gap)
+            probe = min(good + gap, made)
+            if probe == good:
+                return made, ended  # it keeps them up to the last state made: still braking
+            if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                          step, states, probe):
+                good, gap = probe, 2 * gap
+            else:
+                bad = probe
+        while bad - good > 1:
+            middle = (good + bad) // 2
+            if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                          step, states, middle):
+                good = middle
+            else:
+                bad = middle
+        k = good
+        if states[k + 1, 1] > 0.0:
+            # Brake less in step k, as hard as still lets easing off keep every limit.
+            s, v, u = states[k, 0], states[k, 1], states[k, 2]
+            h = aligned(breaks, s, v, u, step)
+            j = jerks[k]
+            most = hardest(grid, g1, g2, g3, w1, w2, acceleration, jerk, wafer, s, v, u,
+                           h)[1]
+            low, high = j, min(max(easing(v, u), j), most)
+            found = False
+            for _ in range(halvings):
+                middle_jerk = 0.5 * (low + high)
+                s1, v1, u1 = advance(s, v, u, middle_jerk, h)
+                if v1 > 0.0 and eases(grid, breaks, g1, g2, g3, w1, w2, acceleration,
+                                      jerk, wafer, step, s1, v1, u1):
+                    high, found = middle_jerk, True
+                else:
+                    low = middle_jerk
+            if found:
+                s1, v1, u1 = advance(s, v, u, high, h)
+                jerks[k] = high
+                starts[k + 1] = starts[k] + h
+                states[k + 1, 0], states[k + 1, 1], states[k + 1, 2] = s1, v1, u1
+                n, can_ease = k + 1, True
+                continue
+        return _eased(grid, breaks, starts, jerks, states, k, step)
+
+
+@kernel(nogil=True)
+def _ahead(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, horizon,
+           starts, jerks, states, made, ended, target):
+    """
+    Make the hardest steps from ``states[made]`` until ``target``; return (made, how it ended).
+
+    ``MORE`` while steps can still be made; else ``RESTED`` (the speed at the last step's
+    end, ``states[made]``, would be zero or less), ``PAST`` the samples or ``GAVE_UP`` (out
+    of room, or at ``horizon``), after which nothing is made.
+    """
+    if ended != MORE:
+        return made, ended
+    while made < target:
+        if made >= len(jerks) or starts[made] >= horizon:
+            return made, GAVE_UP
+        s, v, u = states[made, 0], states[made, 1], states[made, 2]
         h = aligned(breaks, s, v, u, step)
-        if not easing_off:
-            ulo, uhi, jlo, jhi = bounds(grid, g1, g2, g3, w1, w2, acceleration,
-                                        jerk, wafer, s, v, u, h)
-            if np.isnan(ulo):
-                return n, PAST
-            # Brake: the hardest jerk, then held within the deceleration the acceleration
-            # limits leave at the step's middle and end (where the limits along the path
-            # turn, an end alone lets the middle pass them).
-            least, most = -np.inf, np.inf
-            for part in (0.5, 1.0):
-                c = part * h
-                s1, v1, _ = advance(s, v, u, jlo, c)
-                lo1, hi1, _, _ = bounds(grid, g1, g2, g3, w1, w2, acceleration,
-                                        jerk, wafer, s1, v1, u, 0.0)
-                if not np.isnan(lo1):
-                    least = max(least, (lo1 - u) / c)
-                    most = min(most, (min(hi1, 0.0) - u) / c)
-            j = min(max(jlo, least), most, jhi)
-            s1, v1, u1 = advance(s, v, u, j, h)
-            later = v1 > 0.0 and eases(grid, breaks, g1, g2, g3, w1, w2, acceleration,
-                                       jerk, wafer, step, s1, v1, u1)
-            if can_ease and not later and v1 > 0.0:
-                # Brake less, as hard as still lets easing off keep every limit.
-                low, high = j, min(max(easing(v, u), j), jhi)
-                for _ in range(halvings):
-                    middle = 0.5 * (low + high)
-                    s1, v1, u1 = advance(s, v, u, middle, h)
-                    if v1 > 0.0 and eases(grid, breaks, g1, g2, g3, w1, w2, acceleration,
-                                          jerk, wafer, step, s1, v1, u1):
-                        high, later = middle, True
-                    else:
-                        low = middle
-                if later:
-                    j = high
-            easing_off = (can_ease and not later) or v1 <= 0.0
-            can_ease = later
-        if easing_off:
-            j = easing(v, u)
-            if not (j > 0.0 and np.isfinite(j)):
-                if v > REST_SPEED:
-                    return n, GAVE_UP  # nothing to ease off, yet moving
-                # Rounding left it a hair from rest: it is there.
-                states[n, 1], states[n, 2] = 0.0, 0.0
-                return n, RESTED
-            h = min(h, -u / j)
-            if place(grid, s)[0] < 0:
-                return n, PAST
+        j = hardest(grid, g1, g2, g3, w1, w2, acceleration, jerk, wafer, s, v, u, h)[0]
+        if np.isnan(j):
+            return made, PAST
+        s1, v1, u1 = advance(s, v, u, j, h)
+        jerks[made] = j
+        starts[made + 1] = starts[made] + h
+        states[made + 1, 0], states[made + 1, 1], states[made + 1, 2] = s1, v1, u1
+        made += 1
+        if v1 <= 0.0:
+            return made, RESTED
+    return made, MORE
+
+
+@kernel(nogil=True)
+def _eased(grid, breaks, starts, jerks, states, n, step):
+    """
+    Fill the phases that ease off from ``states[n]`` to rest; return (phases, how it ended).
+
+    Constant jerk (``easing``), steps ending at the curve's breaks, the last as long as it
+    takes.
+    """
+    s, v, u = states[n, 0], states[n, 1], states[n, 2]
+    while n < len(jerks):
+        j = easing(v, u)
+        if not (j > 0.0 and np.isfinite(j)):
+            if v > REST_SPEED:
+                return n, GAVE_UP  # nothing to ease off, yet moving
+            # Rounding left it a hair from rest: it is there.
+            states[n, 1], states[n, 2] = 0.0, 0.0
+            return n, RESTED
+        h = min(aligned(breaks, s, v, u, step), -u / j)
+        if place(grid, s)[0] < 0:
+            return n, PAST
         s, v, u = advance(s, v, u, j, h)
-        t += h
         jerks[n] = j
         n += 1
-        starts[n] = t
-        if easing_off and h == -states[n - 1, 2] / j:
+        starts[n] = starts[n - 1] + h
+        if h == -states[n - 1, 2] / j:
             v, u = 0.0, 0.0  # exactly at rest: what the last step reaches, up to rounding
         states[n, 0], states[n, 1], states[n, 2] = s, v, u
         if v <= 0.0 and u >= 0.0:

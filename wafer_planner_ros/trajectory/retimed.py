@@ -80,9 +80,12 @@ class Retimed(Trajectory):
             phase = np.clip(np.searchsorted(states[:, 0], inside, side='right') - 1, 0,
                             len(timing.jerks) - 1)
             low, high = starts[phase].copy(), starts[phase + 1].copy()
+            (p, v, a), j = states[phase].T, timing.jerks[phase]
             for _ in range(CROSSING_HALVINGS):
                 middle = 0.5 * (low + high)
-                below = timing.evaluate(middle)[:, 0] < inside
+                # sigma at ``middle``, within the phase: as ``JerkProfile.evaluate`` has it.
+                tau = middle - starts[phase]
+                below = p + tau * (v + tau * (a / 2.0 + tau * j / 6.0)) < inside
                 low, high = np.where(below, middle, low), np.where(below, high, middle)
             crossings = high
         return np.unique(np.concatenate([[0.0, self.duration], timing.turns(), crossings]))

@@ -149,20 +149,24 @@ def _shares(trajectory, path, at, coast, robot, acceleration, jerk, wafer) -> tu
     """
     Return (stop or None, whether every try ended): braking ``coast`` s after ``at``.
 
-    Each share of the limits in turn (``SHARES``).
+    Each share of the limits in turn (``SHARES``); a try no sooner at rest than the rest
+    of the move is not checked (``_keeps``): it would not be the stop.
 
     A try that runs past the samples ends none: the caller samples more of the path.
     """
     begin = at + coast
+    left = trajectory.duration - at
     q, qd, qdd = (x[0] for x in trajectory.evaluate_orders([begin], (0, 1, 2)))
     state = np.abs(qdd), np.abs(robot.arm.wafer_acceleration(q, qd, qdd))
     for share in SHARES:
-        phases, status = _timing(path, begin, *_kept(acceleration, wafer, share, *state),
-                                 jerk * share)
+        phases, status = _timing(path, begin, left - coast,
+                                 *_kept(acceleration, wafer, share, *state), jerk * share)
         if status == PAST:
             return None, False
         if status == GAVE_UP:
             continue
+        if coast + phases[0][-1] >= left:
+            continue  # no sooner at rest than the rest of the move (rounding)
         if coast > 0.0:
             # From ``at`` itself: (at + coast) - coast need not be ``at`` again.
             phases = _coasted(phases, at, coast)
@@ -256,15 +260,19 @@ def _path(trajectory: Trajectory, arm, begin: float, end: float) -> tuple:
     return s, breaks, g1, g2, g3, w1, w2
 
 
-def _timing(path: tuple, begin: float, acceleration, wafer, jerk) -> tuple:
-    """Return ((starts, jerks, states), status: ``RESTED``, ``PAST`` or ``GAVE_UP``)."""
+def _timing(path: tuple, begin: float, horizon: float, acceleration, wafer, jerk) -> tuple:
+    """
+    Return ((starts, jerks, states), status: ``RESTED``, ``PAST`` or ``GAVE_UP``).
+
+    ``horizon``: s of the stop's own time it must be at rest before (``braking.brake``).
+    """
     s, breaks, g1, g2, g3, w1, w2 = path
     starts = np.empty(MAX_STEPS + 1)
     jerks = np.empty(MAX_STEPS)
     states = np.empty((MAX_STEPS + 1, 3))
     count, status = brake(s, breaks, g1, g2, g3, w1, w2,
                           np.asarray(acceleration, float), np.asarray(jerk, float),
-                          np.asarray(wafer, float), STEP, HALVINGS, begin, starts, jerks,
-                          states)
+                          np.asarray(wafer, float), STEP, HALVINGS, begin, float(horizon),
+                          starts, jerks, states)
     return (starts[:count + 1].copy(), jerks[:count].copy(),
             states[:count + 1].copy()), int(status)

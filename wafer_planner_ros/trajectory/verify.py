@@ -15,6 +15,13 @@ the exact peak joint speed there. Also checked: the start and goal are hit exact
 velocity and acceleration are zero at both ends (at the start, for a curve that continues a
 motion, those of that motion). Every figure that is NaN is a problem:
 a comparison with NaN never passes.
+
+A curve that follows a verified curve's path under a timing of its own (a controlled stop,
+``retimed.Retimed``) passes through none but that curve's configurations: its well-formed
+check holds its time on the base's and never moving back. Given the verification the base
+passed (``base``), what depends on the configurations alone (the proof, the collision
+checks, the ports' tolerances) holds as it did for the base and is not done again; the
+limits, which the timing changes, and the ends are checked as for any curve.
 """
 
 from dataclasses import dataclass, field
@@ -27,6 +34,7 @@ from wafer_planner_ros.trajectory.constraints import limit_constraints, position
 from wafer_planner_ros.trajectory.constraints import state_ratios, States
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.proof import CurveProof, DEFAULT_MAX_DEPTH, prove
+from wafer_planner_ros.trajectory.retimed import Retimed
 
 LIMIT_STEP = 1e-3      # s
 COLLISION_STEP = 1e-3  # rad
@@ -55,21 +63,37 @@ class Verification:
     collision_samples: int = 0
     proof: Optional[CurveProof] = None
     """The proof that the curve is collision-free (None only if it was not attempted)."""
+    on_base: bool = False
+    """Whether the proof, the clearance and the port figures are those of the verified
+    curve whose path this one follows (``verify``'s ``base``): its configurations are
+    among that curve's, so its clearance is at least that one's."""
 
     @property
     def ok(self) -> bool:
         """Return whether the trajectory passed."""
         return not self.problems
 
+    @property
+    def proven(self) -> bool:
+        """Return whether it passed with its path proven: a path another curve may follow."""
+        return self.ok and self.proof is not None and self.proof.certified
+
 
 def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray,
-           moving: Optional[Tuple[np.ndarray, np.ndarray]] = None) -> Verification:
+           moving: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+           base: Optional['Verification'] = None) -> Verification:
     """
     Check a trajectory of ``cell``'s robot from start to goal.
 
     ``moving``: the velocity and acceleration it must start with, for a curve that
-    continues a motion (a controlled stop); None: it starts at rest.
+    continues a motion (a controlled stop); None: it starts at rest. ``base``: for a
+    ``Retimed`` curve, the verification its base passed when the caller made or answered
+    it (held since, never read back from a file): its configurations are not checked
+    again (the module).
     """
+    if base is not None and not (isinstance(trajectory, Retimed) and base.proven):
+        raise ValueError('a verification to follow is given for a curve that follows no '
+                         'verified path')
     problem = trajectory.ill_formed(start, goal)
     if problem is not None:
         return Verification(problems=(f'ill-formed curve: {problem}',))
@@ -97,6 +121,13 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray,
     if not gap <= END_TOLERANCE:
         problems.append(f'velocity or acceleration at the start is {gap:.3g} from '
                         + ('zero' if moving is None else 'the motion it continues'))
+    peak_jerk = tuple(np.abs(qddd).max(axis=0).tolist())
+    peak_wafer_jerk = float(np.hypot(*robot.arm.wafer_jerk(q, qd, qdd, qddd).T).max())
+    if base is not None:
+        return Verification(problems=tuple(problems), ratios=ratios,
+                            min_clearance=base.min_clearance, peak_jerk=peak_jerk,
+                            peak_wafer_jerk=peak_wafer_jerk, port_ratios=base.port_ratios,
+                            limit_samples=len(t), proof=base.proof, on_base=True)
     port_ratios, breach = port_deviation(cell.port_model, q)
     problems += [f'the wafer inside a port reaches {ratio:.4f} x its {name} tolerance'
                  f'{breach}' for name, ratio in port_ratios.items() if not ratio <= 1.0]
@@ -117,10 +148,9 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray,
             f', margin {robot.clearance_margin * 1000:.2f} mm)'
             if robot.clearance_margin else ')'))
     return Verification(problems=tuple(problems), ratios=ratios, min_clearance=distance,
-                        peak_jerk=tuple(np.abs(qddd).max(axis=0).tolist()),
-                        peak_wafer_jerk=float(np.hypot(*robot.arm.wafer_jerk(
-                            q, qd, qdd, qddd).T).max()), port_ratios=port_ratios,
-                        limit_samples=len(t), collision_samples=checks, proof=proof)
+                        peak_jerk=peak_jerk, peak_wafer_jerk=peak_wafer_jerk,
+                        port_ratios=port_ratios, limit_samples=len(t),
+                        collision_samples=checks, proof=proof)
 
 
 def port_deviation(model, q: np.ndarray) -> tuple:
