@@ -8,9 +8,14 @@ checkout's code) with the packaged parameters (``--params-file config/wafer_plan
 ``planning.station_table_ports`` off: the moves through the ports take an hour or more to
 plan at start-up and would share the two cores (and the status's ``busy_with``) meanwhile.
 The peer (this process) waits until the station table is ready, then, for every station
-pair of the default cell (``station_pairs``, 12) and each pass (``--passes``, 2), asks the
-loaded move (answered from the table) and stops it at ``--moments`` (10) moments
-k T / (moments + 1) of its cycle time T, each moment twice, in alternating order:
+pair of the default cell (``station_pairs``, 12) and each pass (``--passes``, 2), stops the
+loaded move (answered from the table) at ``--moments`` (10) moments near
+k T / (moments + 1) of its cycle time T, each moment twice, in alternating order, each time
+on a move asked afresh and running: as a controller stops a robot now, the request goes out
+when the move has run to the moment less ``--lead`` (0.05 s) and names the moment
+``--lead`` after the instant it is sent (its stamp's clock), so the node answers from the
+stops it made ahead of the running move where it has made that one (``braking_from`` later
+than ``at``: counted as made ahead) and finds the stop for the moment itself otherwise:
 
 (a) idle: nothing else asked (the node's status says it plans nothing, queue empty);
 (b) planning: a joint request just sent (one of the 50 farthest of ``random_pairs``,
@@ -35,6 +40,10 @@ Whether a stop was the rest of the move (``'rest'``) is not among the result's v
 (``messages.plan_values`` leaves out the stop's ``timing``); it is told apart here by its
 duration: a 'rest' stop is the rest of the move, ``cycle_time`` = T - at (to 1e-9 s), while
 ``controlled_stop`` keeps a braked one only when it is shorter (inferred, so marked so).
+
+Each answer's duration is also compared with the core's stop of the same move found for
+that moment itself (``Planner.stop``, the whole-curve move planned here: the table's): what a
+stop made ahead costs in time to rest.
 
 Prints a table; writes ``bench/results/stop_node.json`` (every row, the summary, the
 machine, the commit). Usage: ``python bench/bench_stop_node.py [--passes 2]
@@ -67,7 +76,10 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.reading import read
+from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.trajectory.methods import WholeCurve
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / 'bench' / 'results' / 'stop_node.json'
@@ -79,6 +91,9 @@ JITTER = 0.03
 """s: the stop is sent up to this long after the status says the joint request is planned."""
 ATTEMPTS = 4
 """Joint requests tried per stop of condition (b) before it is given up."""
+PLANNING_BEFORE = 0.03
+"""s before the stop is due that condition (b) sends its joint request (it is being
+planned 5-20 ms later, then the stop waits up to ``JITTER``)."""
 TARGET_MS = 10.0
 """The issue's target: p99 end to end while a joint request is being planned."""
 
@@ -115,7 +130,8 @@ class Peer(Node):
         self._store(self.trajectories, msg.header.frame_id, {
             'perf': perf, 'wall_ns': wall, 'source_ns': info.get('source_timestamp'),
             'received_ns': info.get('received_timestamp'), 'points': len(msg.points),
-            'duration': last.sec + 1e-9 * last.nanosec if last is not None else 0.0})
+            'duration': last.sec + 1e-9 * last.nanosec if last is not None else 0.0,
+            'stamp': msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec})
 
     def _store(self, inbox: dict, key: str, entry: dict) -> None:
         with self.lock:
@@ -147,12 +163,17 @@ class Peer(Node):
                 return json.loads(future.result().message)
             self.status_client.remove_pending_request(future)
 
-    def send_stop(self, stop_id: str, trajectory: str, at: float) -> tuple:
-        """Publish a stop request; return (perf counter, wall ns) just before it went."""
+    def send_stop(self, stop_id: str, trajectory: str, began: float, lead: float) -> tuple:
+        """
+        Publish a stop request of a move that began at ``began`` (s), ``lead`` s from now.
+
+        Return (perf counter, wall ns, at) just before it went.
+        """
+        at = time.time() - began + lead
         msg = String(data=json.dumps({'id': stop_id, 'trajectory': trajectory, 'at': at}))
         perf, wall = time.perf_counter(), time.time_ns()
         self.stops.publish(msg)
-        return perf, wall
+        return perf, wall, at
 
     def send_station(self, request_id: str, start: str, goal: str) -> None:
         """Publish a station request."""
@@ -221,10 +242,11 @@ def _move(peer: Peer, request_id: str, start: str, goal: str) -> dict:
     return values
 
 
-def _stop(peer: Peer, stop_id: str, move_id: str, at: float) -> dict:
-    """Send one stop request and wait for its answer; return its row (times in ms)."""
+def _stop(peer: Peer, stop_id: str, move_id: str, lead: float) -> dict:
+    """Stop a running move ``lead`` s from now; wait for the answer; return its row (ms)."""
     event = peer.expect(stop_id)
-    perf, wall = peer.send_stop(stop_id, move_id, at)
+    perf, wall, at = peer.send_stop(stop_id, move_id, peer.trajectories[move_id]['stamp'],
+                                    lead)
     if not event.wait(60.0):
         raise TimeoutError(stop_id)
     result = peer.results[stop_id]
@@ -235,8 +257,10 @@ def _stop(peer: Peer, stop_id: str, move_id: str, at: float) -> dict:
            'result_ms': 1e3 * (result['perf'] - perf),
            'result_source_ns': result['source_ns'], 'result_received_ns': result['received_ns'],
            'result_callback_ns': result['wall_ns']}
-    for key in ('node_ms', 'stop_ms', 'verify_ms', 'planning_time_ms', 'cycle_time'):
+    for key in ('node_ms', 'stop_ms', 'verify_ms', 'planning_time_ms', 'cycle_time',
+                'braking_from'):
         row[key] = float(values[key]) if key in values else None
+    row['made_ahead'] = row['braking_from'] is not None and row['braking_from'] > at
     if trajectory is not None:
         row.update(trajectory_ms=1e3 * (trajectory['perf'] - perf),
                    trajectory_source_ns=trajectory['source_ns'],
@@ -247,8 +271,20 @@ def _stop(peer: Peer, stop_id: str, move_id: str, at: float) -> dict:
     return row
 
 
-def _busy_stop(peer: Peer, stop_id: str, move_id: str, at: float, far: list, counter: list,
-               rng, bad: set) -> dict:
+def _running(peer: Peer, move_id: str, pair: tuple, fraction: float, before: float) -> float:
+    """
+    Ask a move; return its cycle time once it has run to ``fraction`` of it less ``before`` s.
+
+    Its stamp is when it starts (the node's clock, the same wall clock as this one's).
+    """
+    cycle = float(_move(peer, move_id, *pair)['cycle_time'])
+    began = peer.trajectories[move_id]['stamp']
+    time.sleep(max(0.0, began + fraction * cycle - before - time.time()))
+    return cycle
+
+
+def _busy_stop(peer: Peer, stop_id: str, move_id: str, lead: float, far: list,
+               counter: list, rng, bad: set) -> dict:
     """
     Stop while a joint request is being planned (the module); return the row.
 
@@ -282,7 +318,7 @@ def _busy_stop(peer: Peer, stop_id: str, move_id: str, at: float, far: list, cou
             _idle(peer)
             continue
         this_id = stop_id if attempt == 0 else f'{stop_id}-{attempt}'
-        row = _stop(peer, this_id, move_id, at)
+        row = _stop(peer, this_id, move_id, lead)
         if not _wait(lambda: peer.done(joint_id), 60.0):
             raise TimeoutError(joint_id)
         joint = peer.results[joint_id]
@@ -371,6 +407,12 @@ def _summary(rows: list) -> dict:
             for name, part in (('rest', rest), ('braked', braked))}
     for key in ('e2e_ms', 'result_ms', 'trajectory_ms', 'node_ms', 'stop_ms', 'verify_ms'):
         out[key] = _stats([r.get(key) for r in rows])
+    ahead = [r for r in rows if r.get('made_ahead')]
+    out['made_ahead_share'] = len(ahead) / len(rows) if rows else None
+    out['by_source'] = {name: {key: _stats([r.get(key) for r in part]) for key in
+                               ('e2e_ms', 'node_ms', 'stop_ms', 'verify_ms')}
+                        for name, part in (('made_ahead', ahead), ('found_for_the_moment', [
+                            r for r in rows if not r.get('made_ahead')]))}
     out['outside_stop_verify_ms'] = _stats([r['e2e_ms'] - r['stop_ms'] - r['verify_ms']
                                             for r in rows if r.get('stop_ms') is not None])
     split = [r['split_ms'] for r in rows if 'split_ms' in r]
@@ -396,6 +438,8 @@ def main() -> int:
     parser.add_argument('--moments', type=int, default=10)
     parser.add_argument('--pairs', type=int, default=0, help='the first N pairs (0: all)')
     parser.add_argument('--domain', type=int, default=91, help='ROS_DOMAIN_ID')
+    parser.add_argument('--lead', type=float, default=0.05,
+                        help='s between sending a stop and the moment it names')
     parser.add_argument('--from-rows', help="an earlier run's file: summarise it again")
     args = parser.parse_args()
     if args.from_rows:
@@ -435,33 +479,33 @@ def main() -> int:
               f'{ready_s:.1f} s after discovery; kernels ahead {status["kernels_ahead"]}, '
               f'compiled {status["kernels_compiled"]}', flush=True)
         counter, bad = [0], set()
-        # Warm-up (not counted): a move, stops idle and while planning.
-        _move(peer, 'warm-m', *pairs[0])
-        duration = float(peer.results['warm-m']['values']['cycle_time'])
+        # Warm-up (not counted): stops idle and while planning.
         for k in range(3):
             _idle(peer)
-            _stop(peer, f'warm-i{k}', 'warm-m', (k + 1) * duration / 5)
-            _busy_stop(peer, f'warm-b{k}', 'warm-m', (k + 1) * duration / 5, far, counter,
-                       rng, bad)
+            _running(peer, f'warm-i{k}', pairs[0], 0.3, args.lead)
+            _stop(peer, f'warm-s{k}', f'warm-i{k}', args.lead)
+            _running(peer, f'warm-b{k}', pairs[0], 0.3, args.lead + PLANNING_BEFORE)
+            _busy_stop(peer, f'warm-t{k}', f'warm-b{k}', args.lead, far, counter, rng, bad)
         for turn in range(args.passes):
             for p, (start, goal) in enumerate(pairs):
-                move_id = f'm{turn}-{p}'
-                move = _move(peer, move_id, start, goal)
-                cycle = float(move['cycle_time'])
                 for k in range(1, args.moments + 1):
-                    at = k * cycle / (args.moments + 1)
+                    fraction = k / (args.moments + 1)
                     order = ('idle', 'planning') if (k + p + turn) % 2 == 0 else \
                         ('planning', 'idle')
                     for condition in order:
                         stop_id = f's{turn}-{p}-{k}-{condition[0]}'
+                        move_id = f'm{turn}-{p}-{k}-{condition[0]}'
                         if condition == 'idle':
                             _idle(peer)
-                            time.sleep(0.02)
-                            row = _stop(peer, stop_id, move_id, at)
+                            cycle = _running(peer, move_id, (start, goal), fraction, args.lead)
+                            row = _stop(peer, stop_id, move_id, args.lead)
                         else:
-                            row = _busy_stop(peer, stop_id, move_id, at, far, counter, rng, bad)
+                            cycle = _running(peer, move_id, (start, goal), fraction,
+                                             args.lead + PLANNING_BEFORE)
+                            row = _busy_stop(peer, stop_id, move_id, args.lead, far, counter,
+                                             rng, bad)
                         row.update(key=f'{turn}-{p}-{k}', pair=[start, goal], moment=k,
-                                   move_cycle_time=cycle, rest_of_move=cycle - at,
+                                   move_cycle_time=cycle, rest_of_move=cycle - row['at'],
                                    condition=condition)
                         rows[condition].append(row)
             load.append(os.getloadavg())
@@ -483,6 +527,7 @@ def main() -> int:
     for condition_rows in rows.values():
         for row in condition_rows:
             _breakdown(row, recorded)
+    against_core = _against_core(cell, rows)
     summary, paired = _summarised(rows)
     report = {
         'what': __doc__.split('\n')[1],
@@ -492,17 +537,51 @@ def main() -> int:
                                'planning.station_table_ports': False},
                  'status_at_end': final_status},
         'passes': args.passes, 'moments': args.moments, 'pairs': len(pairs),
-        'jitter_s': JITTER, 'target_p99_ms': TARGET_MS, 'summary': summary,
+        'jitter_s': JITTER, 'lead_s': args.lead, 'target_p99_ms': TARGET_MS,
+        'against_core': against_core, 'summary': summary,
         'paired_planning_minus_idle_ms': paired,
         'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
                     'platform': platform.platform(), 'commit': _head_commit(),
                     'loadavg': load},
         'rows': rows}
     _print(summary, paired)
+    print("time to rest / the core's stop found for the moment itself: "
+          + json.dumps(against_core), flush=True)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(report, indent=1) + '\n')
     print(f'written {RESULTS} (node log {temp / "node.log"})', file=sys.stderr)
     return 0
+
+
+def _against_core(cell, rows: dict) -> dict:
+    """
+    Return each OK stop's time to rest against the core's stop of its moment (the module).
+
+    Adds ``core_cycle_time`` to the rows compared; a move whose cycle time is not the one
+    planned here (another curve than the table's) is counted and not compared.
+    """
+    planner = Planner(cell, load_or_build(cell).roadmap, PlannerSettings(method=WholeCurve))
+    moves, ratios, other = {}, {'made_ahead': [], 'found_for_the_moment': []}, 0
+    for row in (r for part in rows.values() for r in part):
+        if row['code'] != 'OK' or row.get('cycle_time') is None:
+            continue
+        pair = tuple(row['pair'])
+        if pair not in moves:
+            moves[pair] = planner.plan(*pair)
+        move = moves[pair]
+        if abs(move.cycle_time - row['move_cycle_time']) > 1e-9:
+            other += 1
+            continue
+        core = planner.stop(move.trajectory, row['at'], 'bench', verified=move.verification)
+        row['core_cycle_time'] = core.cycle_time
+        kind = 'made_ahead' if row['made_ahead'] else 'found_for_the_moment'
+        ratios[kind].append(row['cycle_time'] / core.cycle_time)
+    out = {'moves_not_planned_the_same': other}
+    for kind, values in ratios.items():
+        out[kind] = {'median': float(np.median(values)), 'p90': float(
+            np.percentile(values, 90)), 'max': float(np.max(values)),
+            'mean': float(np.mean(values)), 'n': len(values)} if values else {}
+    return out
 
 
 def _summarised(rows: dict) -> tuple:
@@ -590,6 +669,15 @@ def _print(summary: dict, paired: dict) -> None:
               f"{by['braked']['stop_ms'].get('p50', float('nan')):.1f}; end to end p99 rest "
               f"{by['rest']['e2e_ms'].get('p99', float('nan')):.1f} vs braked "
               f"{by['braked']['e2e_ms'].get('p99', float('nan')):.1f}")
+        if part.get('made_ahead_share') is not None:
+            source = part['by_source']
+            print(f"{condition}: made ahead {100 * part['made_ahead_share']:.1f} %; end to "
+                  'end p50 / p99 made ahead ' + '{p50:.1f} / {p99:.1f}'.format(
+                      **{'p50': float('nan'), 'p99': float('nan'),
+                         **source['made_ahead']['e2e_ms']})
+                  + ', found for the moment ' + '{p50:.1f} / {p99:.1f}'.format(
+                      **{'p50': float('nan'), 'p99': float('nan'),
+                         **source['found_for_the_moment']['e2e_ms']}))
 
 
 if __name__ == '__main__':

@@ -1,5 +1,7 @@
 """Stop requests through the node: a published move stopped on its path, and bad requests."""
 
+import time
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from node_harness import values, wait_for
 import numpy as np
@@ -7,7 +9,9 @@ import pytest
 from std_msgs.msg import String
 
 from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.service.prepared_stops import EVERY
 from wafer_planner_ros.trajectory.methods import WholeCurve
+from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 
 def _trajectory(harness, request_id: str):
@@ -81,7 +85,9 @@ def test_bad_stop_requests_get_their_codes_and_the_node_serves_on(harness):
     assert values(harness.result('after'))['code'] == 'OK'
 
 
-def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys):
+def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys,
+                                                 default_cell, default_roadmap):
+    # Among them one answered from a stop made ahead, replayed braking from the same moment.
     from std_srvs.srv import SetBool
     from wafer_planner_ros.cli.common import run
     from wafer_planner_ros.cli.replay import main as replay_main
@@ -96,6 +102,7 @@ def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys)
     for request_id in ('s3', 's4', 'd4'):
         harness.result(request_id)
     assert values(harness.result('d4'))['code'] == 'OK'
+    ahead = _stopped_ahead(harness, 'm4', default_cell, default_roadmap)
     assert harness.call('set_recording', SetBool.Request(data=False)).success
     from pathlib import Path
     bags = sorted(p for p in Path(harness.recordings).iterdir() if p.is_dir())
@@ -106,8 +113,46 @@ def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys)
     code = run(replay_main, [str(bags[-1]), '--compare', '--cache-dir', str(roadmap_cache)])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert ' 0 different' in out and 's3' in out and 'd4' in out, out
+    assert ' 0 different' in out and 's3' in out and 'd4' in out and ahead in out, out
     assert '0 not compared' in out, out
+
+
+def _stopped_ahead(harness, request_id: str, cell, roadmap) -> str:
+    """
+    Have a running move stopped a little ahead of where it is, until a stop made ahead answers.
+
+    As a controller stops a robot now: ``at`` 0.1 s after the moment the request is sent.
+    The answer follows the move to the moment it was made from (at most ``EVERY`` later),
+    then brakes as the core's stop from that moment does. Return the stop's id.
+    """
+    harness.send_stations({'id': request_id, 'from': 'loadport2', 'to': 'loadlock1'})
+    assert values(harness.result(request_id))['code'] == 'OK'
+    wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
+    sent = next(t for t in harness.trajectories if t.header.frame_id == request_id)
+    began = sent.header.stamp.sec + 1e-9 * sent.header.stamp.nanosec
+    planner = Planner(cell, roadmap)
+    move = planner.plan('loadport2', 'loadlock1').trajectory
+    for k in range(20):
+        time.sleep(0.1)
+        at = time.time() - began + 0.1
+        if at > move.duration - 0.2:
+            break
+        stop_id = f'{request_id}-stop{k}'
+        harness.send_stop({'id': stop_id, 'trajectory': request_id, 'at': at})
+        got = values(harness.result(stop_id))
+        assert got['code'] == 'OK'
+        braking = float(got['braking_from'])
+        assert at <= braking <= at + EVERY + 1e-9
+        if braking > at:
+            made = controlled_stop(move, braking, cell.robot)
+            expected = planner.stop(move, at, request_id, ahead=made)
+            assert float(got['cycle_time']) == expected.cycle_time
+            times, q, qd, qdd = _trajectory(harness, stop_id)
+            state = [x[0] for x in move.evaluate_orders([at], range(3))]
+            assert np.array_equal(q[0], state[0])
+            assert np.abs(qd[0] - state[1]).max() <= 1e-9
+            return stop_id
+    raise AssertionError('no stop of the running move was answered from one made ahead')
 
 
 def test_a_stop_is_stamped_when_it_starts(harness):

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.service.prepared_stops import EVERY
+from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 START = 'loadport1'
 GOAL = 'loadlock2'
@@ -133,7 +135,12 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     # does, which is the node's stamping of moves, not the stop.)
     limits = robot.limit_set.joints
     planner = Planner(default_cell, default_roadmap)
-    stop = planner.stop(move, at, request_id)
+    # The core's stop there: braking from the moment the node's answer says (a stop made
+    # ahead follows the move to its moment first, at most EVERY later).
+    braking = float(values(result)['braking_from'])
+    assert at <= braking <= at + EVERY + 1e-9
+    stop = planner.stop(move, at, request_id, ahead=None if braking == at else
+                        controlled_stop(move, braking, planner.cell.robot))
     near = t >= at - 0.1
     dt = np.diff(t[near])[:, None]
     assert np.all(np.abs(np.diff(q[near], axis=0)) <= limits.velocity * dt * (1 + 1e-6) + 1e-9)

@@ -14,7 +14,7 @@ from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
 from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.retimed import Retimed
-from wafer_planner_ros.trajectory.stopping import hold_demand
+from wafer_planner_ros.trajectory.stopping import controlled_stop, hold_demand
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 STEP = 1e-4
@@ -158,6 +158,36 @@ def test_a_stop_of_a_verified_move_is_verified_on_its_path_and_in_its_own_limits
     with pytest.raises(ValueError):
         verify(curve, cell, stop.start_q, stop.goal_q, moving=(qd, qdd),
                base=Verification(problems=('not proven',)))
+
+
+def test_a_stop_made_ahead_follows_the_move_to_its_moment_then_brakes_as_it_does(
+        planner, moves):
+    result = moves['station']
+    move, robot = result.trajectory, planner.cell.robot
+    at = 0.3 * move.duration
+    made = controlled_stop(move, at + 0.013, robot)
+    stop = planner.stop(move, at, 'r1', verified=result.verification, ahead=made)
+    curve = stop.trajectory
+    assert stop.verification.ok and stop.metrics['braking_from'] == at + 0.013
+    assert planner.stop(move, at, 'r1').metrics['braking_from'] == at
+    q, qd, qdd = (x[0] for x in move.evaluate_orders([at], range(3)))
+    s_q, s_qd, s_qdd = (x[0] for x in curve.evaluate_orders([0.0], range(3)))
+    assert np.array_equal(s_q, q)
+    assert np.abs(s_qd - qd).max() <= 1e-9 and np.abs(s_qdd - qdd).max() <= 1e-9
+    # The move until the moment, then the stop made there.
+    t = np.linspace(0.0, 0.013, 14)
+    assert np.abs(curve.evaluate(t) - move.evaluate(at + t)).max() <= 1e-12
+    later = np.linspace(0.0, made.trajectory.duration, 50)
+    assert np.abs(curve.evaluate(0.013 + later) - made.trajectory.evaluate(later)).max() \
+        <= 1e-9
+    assert curve.duration == pytest.approx(0.013 + made.trajectory.duration, abs=1e-12)
+    for limit, ratio in _independent(planner.cell, curve, move).items():
+        assert ratio <= 1.0 + 1e-6, f'{limit} at {ratio} x its limit'
+    # Made from before the moment, or of another curve: refused.
+    with pytest.raises(ValueError):
+        planner.stop(move, at + 0.02, 'r1', ahead=made)
+    with pytest.raises(ValueError):
+        planner.stop(moves['port'].trajectory, at, 'r1', ahead=made)
 
 
 @pytest.mark.parametrize('pair, fraction', [(('loadport3', 'loadlock1'), 6 / 40),

@@ -2,7 +2,8 @@
 wafer-replay: re-plan the queries of a recording, or send them to a running node.
 
 ``--compare`` (the default) re-plans every recorded request offline (a stop request: the
-controlled stop of the replayed move it names), with the recorded cell,
+controlled stop of the replayed move it names, braking from the moment the recorded answer
+braked from: a stop the node made ahead follows the move a few ms first), with the recorded cell,
 roadmap size and seed, and the parameters in force when it arrived, and prints the recorded
 and replayed answer and cycle time of each query. Exit 1 when any differs (code, or cycle
 time by more than ``--tolerance``). Answers that depended on the node's load at the time
@@ -31,6 +32,7 @@ from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.planning import PlanningService, within_budget
 from wafer_planner_ros.service.requests import Moving, request_of, RequestError, stop_request
+from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 
 class Replayer:
@@ -156,11 +158,29 @@ class Replayer:
         planner, move = kept
         try:
             stopped = planner.stop(move.trajectory, request.at, request.trajectory,
-                                   move.load, move.verification)
+                                   move.load, move.verification,
+                                   _ahead(planner, move, request.at, query))
         except PlanningError as exc:
             return exc.code.value, None
         self._answers[request.request_id] = (planner, stopped)
         return OK, stopped.cycle_time
+
+
+def _ahead(planner, move, at: float, query: Query):
+    """
+    Return the stop the node made ahead for a recorded stop (None: it was found for ``at``).
+
+    The recorded answer's ``braking_from``: the moment of the move the node's answer braked
+    from (later than ``at`` when it was made ahead), found again here on the replayed move.
+    """
+    braking = query.result.values.get('braking_from') if query.result is not None else None
+    try:
+        moment = float(braking)
+    except (TypeError, ValueError):
+        return None
+    if not at < moment < move.trajectory.duration:
+        return None
+    return controlled_stop(move.trajectory, moment, planner.for_load(move.load).cell.robot)
 
 
 def main(argv=None) -> int:

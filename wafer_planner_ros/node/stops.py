@@ -16,18 +16,24 @@ kept under that id too: a stop of a stop works. A trajectory not kept is
 one answer, whatever happens. A plan request may start in motion too (``"from":
 {"trajectory": ..., "at": ...}``): ``divert`` plans it from a kept trajectory, on the
 planning thread like any plan.
+
+While a kept trajectory runs (its stamp passed, its end not yet: the latest such), a
+thread of its own makes its stops ahead of it (``service.prepared_stops``) whenever no
+stop request is waiting or answered, so that a request is answered from one made ahead,
+the move followed to it first (at most ``prepared_stops.EVERY`` s).
 """
 
 from collections import deque, OrderedDict
 from dataclasses import dataclass
 import threading
 import time
-from typing import Callable
+from typing import Callable, Optional, Tuple
 
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.node import messages
 from wafer_planner_ros.node.faults import reason_of
 from wafer_planner_ros.node.messages import Sent
+from wafer_planner_ros.service.prepared_stops import EVERY, PreparedStops
 from wafer_planner_ros.service.requests import Request
 
 KEPT = 256
@@ -38,23 +44,29 @@ class Stops:
     """The kept trajectories and the stop-answering thread (see the module's description)."""
 
     def __init__(self, send: Callable, answer_error: Callable, answer_internal: Callable,
-                 logger):
+                 logger, clock: Callable):
         """
-        Start the thread.
+        Start the threads.
 
         ``send(*items)`` hands messages to the executor; ``answer_error`` and
-        ``answer_internal`` are the worker's (one answer per query, counted there).
+        ``answer_internal`` are the worker's (one answer per query, counted there);
+        ``clock()`` is the node's time now, as the stamps are (``sec``, ``nanosec``).
         """
-        self._send, self._logger = send, logger
+        self._send, self._logger, self._clock = send, logger, clock
         self._answer_error, self._answer_internal = answer_error, answer_internal
         self._lock = threading.Condition()
         self._kept = OrderedDict()
         """request id -> (planner, result, roadmap) of the trajectories published."""
         self._waiting = deque()
+        self._answering = False
+        self._prepared: Optional[Tuple[str, PreparedStops]] = None
+        """The running trajectory's id and its stops made ahead."""
         self._stopping = False
-        self._thread = threading.Thread(target=self._work, name='wafer_planner_stop',
-                                        daemon=True)
-        self._thread.start()
+        self._threads = [threading.Thread(target=target, name=name, daemon=True)
+                         for name, target in (('wafer_planner_stop', self._work),
+                                              ('wafer_planner_stop_ahead', self._prepare))]
+        for thread in self._threads:
+            thread.start()
 
     def keep(self, request_id: str, planner, result, roadmap, stamp) -> None:
         """
@@ -69,6 +81,7 @@ class Stops:
             self._kept[request_id] = (planner, result, roadmap, stamp)
             while len(self._kept) > KEPT:
                 self._kept.popitem(last=False)
+            self._lock.notify_all()  # a new trajectory to make stops ahead of
 
     def divert(self, service, request, deadline: float) -> tuple:
         """
@@ -101,35 +114,92 @@ class Stops:
         """Queue a stop request (``service.requests.StopRequest``) received at ``received``."""
         with self._lock:
             self._waiting.append((number, request, received))
-            self._lock.notify()
+            self._lock.notify_all()
 
     def stop(self) -> None:
-        """Have the thread end once idle."""
+        """Have the threads end once idle."""
         with self._lock:
             self._stopping = True
-            self._lock.notify()
+            self._lock.notify_all()
 
     def join(self, timeout: float) -> None:
-        """Wait up to ``timeout`` seconds for the thread."""
-        self._thread.join(timeout)
+        """Wait up to ``timeout`` seconds for the threads."""
+        end = time.monotonic() + timeout
+        for thread in self._threads:
+            thread.join(max(0.0, end - time.monotonic()))
 
     def _work(self) -> None:
         """Answer the stop requests one at a time until stopped."""
         while True:
             with self._lock:
+                self._answering = False
+                self._lock.notify_all()
                 while not self._waiting and not self._stopping:
                     self._lock.wait()
                 if self._stopping:
                     return
                 number, request, received = self._waiting.popleft()
                 kept = self._kept.get(request.trajectory)
+                prepared = self._prepared
+                self._answering = True
+            ahead = None
+            if prepared is not None and prepared[0] == request.trajectory:
+                ahead = prepared[1].ahead_of(request.at)
             try:
-                self._answer(number, request, received, kept)
+                self._answer(number, request, received, kept, ahead)
             except Exception as exc:  # noqa: B902 - the thread outlives any one request
                 self._logger.error(f'stop thread: {reason_of(exc)}')
 
-    def _answer(self, number: int, request, received: float, kept) -> None:
-        """Answer one stop request (its one answer, whatever happens)."""
+    def _prepare(self) -> None:
+        """Make the running trajectory's stops ahead of it, while no request is answered."""
+        while True:
+            with self._lock:
+                while self._answering or self._waiting:
+                    if self._stopping:
+                        return
+                    self._lock.wait()
+                if self._stopping:
+                    return
+                running = self._running()
+                if running is not None and (self._prepared is None or
+                                            self._prepared[0] != running[0]):
+                    planner, result = self._kept[running[0]][:2]
+                    self._prepared = (running[0], PreparedStops(result.trajectory,
+                                                                planner.cell.robot))
+                elif running is None:
+                    self._prepared = None
+                prepared = self._prepared
+                index = None
+                if prepared is not None:
+                    prepared[1].forget_before(running[1])
+                    index = prepared[1].wanted(running[1])
+                if index is None:
+                    self._lock.wait(EVERY)
+                    continue
+            try:
+                prepared[1].make(index)
+            except Exception as exc:  # noqa: B902 - the thread outlives any one stop
+                self._logger.error(f'stop ahead: {reason_of(exc)}')
+                with self._lock:
+                    self._prepared = None
+                    self._lock.wait(EVERY)
+
+    def _running(self) -> Optional[Tuple[str, float]]:
+        """Return (id, seconds along) of the latest kept trajectory running now, or None."""
+        now = _seconds(self._clock())
+        for request_id in reversed(self._kept):
+            result, stamp = self._kept[request_id][1], self._kept[request_id][3]
+            elapsed = now - _seconds(stamp)
+            if 0.0 <= elapsed < result.trajectory.duration:
+                return request_id, elapsed
+        return None
+
+    def _answer(self, number: int, request, received: float, kept, ahead) -> None:
+        """
+        Answer one stop request (its one answer, whatever happens).
+
+        ``ahead``: its stop made ahead (``PreparedStops.ahead_of``), or None.
+        """
         label = f'{request.trajectory} at {request.at:.6g} s'
         if kept is None:
             self._answer_error(number, request.request_id, ErrorCode.UNKNOWN_TRAJECTORY,
@@ -140,7 +210,7 @@ class Stops:
         begun = time.monotonic()
         try:
             stopped = planner.stop(result.trajectory, request.at, request.trajectory,
-                                   result.load, result.verification)
+                                   result.load, result.verification, ahead)
         except PlanningError as exc:
             self._answer_error(number, request.request_id, exc.code, exc.message, label,
                                'rest', (time.monotonic() - begun) * 1e3, roadmap)
@@ -162,6 +232,11 @@ class Stops:
             return
         self._send((Sent.ANSWER, answer, number))
         self.keep(request.request_id, planner, stopped, roadmap, starts)
+
+
+def _seconds(stamp) -> float:
+    """Return a ROS time (anything with ``sec`` and ``nanosec``) in seconds."""
+    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
 def later(stamp, seconds: float) -> 'Stamp':

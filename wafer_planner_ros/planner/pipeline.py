@@ -118,18 +118,20 @@ class Planner:
         return through(self, a, b, deadline, None, begun, blend=False)
 
     def stop(self, trajectory, at: float, label: str = 'the move',
-             load: Optional[str] = None, verified=None) -> PlanResult:
+             load: Optional[str] = None, verified=None, ahead=None) -> PlanResult:
         """
         Return the controlled stop of ``trajectory`` from ``at`` s on its path (``stop``).
 
         ``load``: the limit set it keeps (None: this planner's); a stop keeps the set the
         move was planned against. ``verified``: the verification the move passed when it
-        was answered, held since (``stop.stop``). Raises PlanningError: OUTSIDE_TRAJECTORY,
-        AT_REST or VERIFICATION_FAILED.
+        was answered, held since; ``ahead``: its stop made ahead, from a moment no earlier
+        than ``at`` (both ``stop.stop``). Raises PlanningError: OUTSIDE_TRAJECTORY, AT_REST
+        or VERIFICATION_FAILED.
         """
         if load is not None and load != self.load:
-            return self.for_load(load).stop(trajectory, at, label, verified=verified)
-        return stop(self, trajectory, at, label, verified)
+            return self.for_load(load).stop(trajectory, at, label, verified=verified,
+                                            ahead=ahead)
+        return stop(self, trajectory, at, label, verified, ahead)
 
     def divert(self, trajectory, at: float, goal, label: str = 'the move',
                load: Optional[str] = None, deadline: Optional[float] = None,

@@ -18,7 +18,8 @@ from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner.endpoints import Endpoint
 from wafer_planner_ros.planner.result import answer, PlanResult
 from wafer_planner_ros.trajectory.chained import Chained
-from wafer_planner_ros.trajectory.stopping import controlled_stop, moving_state
+from wafer_planner_ros.trajectory.stopping import controlled_stop, followed, moving_state
+from wafer_planner_ros.trajectory.stopping import Stop
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 METHOD = 'controlled-stop'
@@ -28,9 +29,14 @@ DIVERT = 'stop-then-move'
 
 
 def stop(planner, trajectory, at: float, label: str,
-         verified: Optional[Verification] = None) -> PlanResult:
+         verified: Optional[Verification] = None, ahead: Optional[Stop] = None) -> PlanResult:
     """
     Return the verified controlled stop of ``trajectory`` from ``at`` (the module).
+
+    ``ahead``: a stop of ``trajectory`` made before it was asked for, from a moment no
+    earlier than ``at`` (``service.prepared_stops``): the answer follows the move to that
+    moment, then brakes as it does (``stopping.followed``); its ``metrics['braking_from']``
+    is that moment (``at`` for a stop found for ``at`` itself).
 
     ``label``: what the stopped move is called in the answer (e.g. its request id).
     ``verified``: the verification ``trajectory`` passed when it was answered, held since
@@ -42,7 +48,8 @@ def stop(planner, trajectory, at: float, label: str,
     """
     begun = time.perf_counter()
     q, qd, qdd = moving_state(trajectory, at)
-    made = controlled_stop(trajectory, at, planner.cell.robot)
+    made = controlled_stop(trajectory, at, planner.cell.robot) if ahead is None else \
+        followed(ahead, trajectory, at)
     curve = made.trajectory
     end = curve.evaluate([curve.duration])[0]
     checked = time.perf_counter()
@@ -57,6 +64,9 @@ def stop(planner, trajectory, at: float, label: str,
     goal = Endpoint(f'{label} stopped', ((None, end),))
     return answer(planner, start, goal, q, end, (None, None), curve, curve.duration,
                   verification, q[None], q[None], {'stopped_at': float(at),
+                                                   'braking_from': float(
+                                                       at if ahead is None else
+                                                       ahead.trajectory.timing.states[0, 0]),
                                                    'share': made.share,
                                                    'timing': made.timing},
                   0, method=METHOD,

@@ -115,6 +115,37 @@ def controlled_stop(trajectory: Trajectory, at: float, robot) -> Stop:
     braked = _braked(trajectory, at, robot, limits.acceleration, jerk, wafer)
     if braked is not None and braked.trajectory.duration < trajectory.duration - at:
         return braked
+    return _rest(trajectory, at)
+
+
+def followed(ahead: Stop, trajectory: Trajectory, at: float) -> Stop:
+    """
+    Return the stop of ``trajectory`` from ``at`` that follows it to ``ahead``'s moment first.
+
+    ``ahead``: a stop of ``trajectory`` (``controlled_stop``) from a moment no earlier than
+    ``at``. The move until that moment (sigma = t), then ``ahead``'s timing: the same limits
+    hold on each part, and at the join sigma' = 1, sigma'' = 0 on both sides (the move's
+    own state). The rest of the move instead where that is no later at rest.
+    Raise PlanningError as ``moving_state`` does; ValueError for a stop from before ``at``.
+    """
+    moving_state(trajectory, at)
+    at = float(at)
+    timing = ahead.trajectory.timing
+    moment = float(timing.states[0, 0])
+    if not (ahead.trajectory.base is trajectory and moment >= at):
+        raise ValueError(f'a stop from {moment:.9g} s of another curve, or before {at:.9g} s')
+    rest = trajectory.duration - at
+    if moment == at:
+        return ahead
+    coast = moment - at
+    if ahead.timing == 'rest' or coast + timing.duration >= rest:
+        return _rest(trajectory, at)
+    phases = _coasted((timing.starts, timing.jerks, timing.states), at, coast)
+    return Stop(Retimed(trajectory, JerkProfile(*phases)), ahead.share, ahead.timing)
+
+
+def _rest(trajectory: Trajectory, at: float) -> Stop:
+    """Return the rest of ``trajectory`` from ``at`` as a stop (sigma = t): it ends at rest."""
     rest = trajectory.duration - at
     return Stop(Retimed(trajectory, JerkProfile(np.array([0.0, rest]), np.zeros(1), np.array(
         [[at, 1.0, 0.0], [trajectory.duration, 1.0, 0.0]]))), None, 'rest')

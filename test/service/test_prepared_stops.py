@@ -1,0 +1,47 @@
+"""Stops made ahead of a running move: which moments, in what order, and what a request gets."""
+
+import numpy as np
+import pytest
+
+from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY, PreparedStops
+from wafer_planner_ros.trajectory.stopping import controlled_stop
+
+
+@pytest.fixture(scope='module')
+def move(default_cell, default_roadmap):
+    return Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
+
+
+def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_passed(
+        move, default_cell):
+    prepared = PreparedStops(move, default_cell.robot)
+    elapsed = 0.5
+    made = []
+    while (index := prepared.wanted(elapsed)) is not None:
+        prepared.make(index)
+        made.append(index)
+    # Every moment after where the move is, up to AHEAD ahead, once and in order.
+    first = int(np.floor(elapsed / EVERY)) + 1
+    assert made == list(range(first, int(np.floor((elapsed + AHEAD) / EVERY)) + 1))
+    # A request a little ahead gets the first moment's stop at or after it, the same stop
+    # the core makes there; none before the move got there, or past what was made.
+    at = elapsed + 0.031
+    ahead = prepared.ahead_of(at)
+    moment = ahead.trajectory.timing.states[0, 0]
+    assert at <= moment < at + EVERY
+    assert ahead.trajectory.duration == controlled_stop(move, moment,
+                                                        default_cell.robot).trajectory.duration
+    assert prepared.ahead_of(elapsed - 0.1) is None
+    assert prepared.ahead_of(elapsed + AHEAD + 0.05) is None
+    # Moments passed are forgotten; what is ahead is kept.
+    prepared.forget_before(elapsed + 0.2)
+    assert prepared.ahead_of(at) is None and prepared.ahead_of(elapsed + 0.25) is not None
+    assert prepared.count == len([k for k in made if k * EVERY >= elapsed + 0.2])
+
+
+def test_no_moment_is_wanted_at_or_past_the_move_s_end(move, default_cell):
+    prepared = PreparedStops(move, default_cell.robot)
+    assert prepared.wanted(move.duration) is None
+    last = prepared.wanted(move.duration - 0.5 * EVERY)
+    assert last is None or last * EVERY < move.duration

@@ -1,0 +1,86 @@
+"""
+Controlled stops made before they are asked for: a moving robot's stops, a few ms apart.
+
+A stop request wants its answer at once (the robot moves on meanwhile), and finding a
+controlled stop (``trajectory.stopping``) takes from a few to some tens of milliseconds.
+So while a published move runs, its stops are made ahead: ``PreparedStops`` holds the
+stops of one move from the moments ``EVERY`` s apart (0, EVERY, 2 EVERY, ...), made in
+the order the move reaches them, from where it is (``wanted``), ``AHEAD`` s ahead at most.
+A request to stop at ``at`` then takes the stop of the first of those moments at or after
+``at``, if it is made (``ahead_of``): the answer follows the move from ``at`` to that
+moment (at most ``EVERY`` s) and brakes from there as that stop does (``Planner.stop``'s
+``ahead``; the rest of the move where that is sooner), verified as every stop is. A moment
+not yet made is found for ``at`` itself, as without this.
+
+The stops are made with the move's own limit set and kept only while they are ahead of
+the move (``forget_before``); nothing here is published: each is a draft of an answer,
+verified when it is one.
+"""
+
+import math
+import threading
+from typing import Dict, Optional
+
+from wafer_planner_ros.errors import PlanningError
+from wafer_planner_ros.trajectory.stopping import controlled_stop, Stop
+
+EVERY = 0.02
+"""s of a move between the moments whose stops are made ahead."""
+AHEAD = 0.5
+"""s of a move ahead of where it is whose stops are made."""
+
+
+class PreparedStops:
+    """The stops of one move made ahead (the module's description); safe across threads."""
+
+    def __init__(self, trajectory, robot):
+        """Make the stops of ``trajectory`` (a published move) under ``robot``'s limit set."""
+        self.trajectory, self.robot = trajectory, robot
+        self._lock = threading.Lock()
+        self._made: Dict[int, Optional[Stop]] = {}
+        """moment index -> its stop (None: none there, e.g. the move rests)."""
+
+    @property
+    def count(self) -> int:
+        """Return how many moments' stops are held."""
+        with self._lock:
+            return len(self._made)
+
+    def wanted(self, elapsed: float) -> Optional[int]:
+        """
+        Return the next moment (index) to make for a move ``elapsed`` s along; None: none.
+
+        The first moment after ``elapsed`` not yet made, no further than ``AHEAD`` ahead
+        and strictly inside the move.
+        """
+        first = max(int(math.floor(max(elapsed, 0.0) / EVERY)) + 1, 1)
+        last = min(int(math.floor((elapsed + AHEAD) / EVERY)),
+                   int(math.ceil(self.trajectory.duration / EVERY)) - 1)
+        with self._lock:
+            for index in range(first, last + 1):
+                if index not in self._made:
+                    return index
+        return None
+
+    def make(self, index: int) -> None:
+        """Make the stop from moment ``index`` (``controlled_stop``) and hold it."""
+        try:
+            stop = controlled_stop(self.trajectory, index * EVERY, self.robot)
+        except PlanningError:
+            stop = None  # at rest there: a request there is refused as it would be anyway
+        with self._lock:
+            self._made[index] = stop
+
+    def ahead_of(self, at: float) -> Optional[Stop]:
+        """Return the stop made from the first moment at or after ``at``; None: not made."""
+        index = int(math.ceil(at / EVERY))
+        if index * EVERY < at:  # rounding
+            index += 1
+        with self._lock:
+            return self._made.get(index)
+
+    def forget_before(self, elapsed: float) -> None:
+        """Drop the stops of the moments the move has passed (``elapsed`` s along)."""
+        with self._lock:
+            for index in [k for k in self._made if k * EVERY < elapsed]:
+                del self._made[index]
