@@ -61,6 +61,7 @@ import sys
 import tempfile
 import threading
 import time
+from typing import Callable
 
 from bench_plan import random_pairs  # bench/ is the script's folder, first on sys.path
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -79,6 +80,7 @@ from wafer_planner_ros.node.planner_node import RELIABLE
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.reading import read
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.table import build_table
 from wafer_planner_ros.trajectory.methods import WholeCurve
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -283,15 +285,28 @@ def _running(peer: Peer, move_id: str, pair: tuple, fraction: float, before: flo
     return cycle
 
 
+def _again(peer: Peer, move_id: str, pair: tuple, fraction: float,
+           lead: float) -> Callable[[int], str]:
+    """Return ``again`` for ``_busy_stop``: a fresh move ``<move_id>-<attempt>`` running."""
+    def again(attempt: int) -> str:
+        _running(peer, f'{move_id}-{attempt}', pair, fraction, lead + PLANNING_BEFORE)
+        return f'{move_id}-{attempt}'
+    return again
+
+
 def _busy_stop(peer: Peer, stop_id: str, move_id: str, lead: float, far: list,
-               counter: list, rng, bad: set) -> dict:
+               counter: list, rng, bad: set, again: Callable[[int], str]) -> dict:
     """
     Stop while a joint request is being planned (the module); return the row.
 
-    ``counter``: [the next joint request's number]; ``bad``: indices into ``far`` refused.
+    ``counter``: [the next joint request's number]; ``bad``: indices into ``far`` refused;
+    ``again(attempt)``: the id of a move asked afresh and running to the same moment, for
+    each attempt after the first (the first move has run on meanwhile).
     """
     tries = []
     for attempt in range(ATTEMPTS):
+        if attempt:
+            move_id = again(attempt)
         while counter[0] % len(far) in bad:
             counter[0] += 1
         index = counter[0] % len(far)
@@ -485,7 +500,8 @@ def main() -> int:
             _running(peer, f'warm-i{k}', pairs[0], 0.3, args.lead)
             _stop(peer, f'warm-s{k}', f'warm-i{k}', args.lead)
             _running(peer, f'warm-b{k}', pairs[0], 0.3, args.lead + PLANNING_BEFORE)
-            _busy_stop(peer, f'warm-t{k}', f'warm-b{k}', args.lead, far, counter, rng, bad)
+            _busy_stop(peer, f'warm-t{k}', f'warm-b{k}', args.lead, far, counter, rng, bad,
+                       _again(peer, f'warm-b{k}', pairs[0], 0.3, args.lead))
         for turn in range(args.passes):
             for p, (start, goal) in enumerate(pairs):
                 for k in range(1, args.moments + 1):
@@ -503,7 +519,8 @@ def main() -> int:
                             cycle = _running(peer, move_id, (start, goal), fraction,
                                              args.lead + PLANNING_BEFORE)
                             row = _busy_stop(peer, stop_id, move_id, args.lead, far, counter,
-                                             rng, bad)
+                                             rng, bad, _again(peer, move_id, (start, goal),
+                                                              fraction, args.lead))
                         row.update(key=f'{turn}-{p}-{k}', pair=[start, goal], moment=k,
                                    move_cycle_time=cycle, rest_of_move=cycle - row['at'],
                                    condition=condition)
@@ -561,13 +578,16 @@ def _against_core(cell, rows: dict) -> dict:
     planned here (another curve than the table's) is counted and not compared.
     """
     planner = Planner(cell, load_or_build(cell).roadmap, PlannerSettings(method=WholeCurve))
+    # The moves as the node's station table holds them (built in the same order: a pair may
+    # be its reverse's curve backwards in time).
+    table = build_table(planner)
     moves, ratios, other = {}, {'made_ahead': [], 'found_for_the_moment': []}, 0
     for row in (r for part in rows.values() for r in part):
         if row['code'] != 'OK' or row.get('cycle_time') is None:
             continue
         pair = tuple(row['pair'])
         if pair not in moves:
-            moves[pair] = planner.plan(*pair)
+            moves[pair] = table.answer(planner, *pair)
         move = moves[pair]
         if abs(move.cycle_time - row['move_cycle_time']) > 1e-9:
             other += 1

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.service import prepared_stops
 from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY, PreparedStops
 from wafer_planner_ros.trajectory.stopping import controlled_stop
 
@@ -14,7 +15,8 @@ def move(default_cell, default_roadmap):
 
 
 def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_passed(
-        move, default_cell):
+        move, default_cell, monkeypatch):
+    monkeypatch.setattr(prepared_stops, 'SHARE', 1e9)  # every moment, however long it takes
     prepared = PreparedStops(move, default_cell.robot)
     elapsed = 0.5
     made = []
@@ -45,3 +47,20 @@ def test_no_moment_is_wanted_at_or_past_the_move_s_end(move, default_cell):
     assert prepared.wanted(move.duration) is None
     last = prepared.wanted(move.duration - 0.5 * EVERY)
     assert last is None or last * EVERY < move.duration
+
+
+def test_stops_that_take_long_to_make_are_made_a_stride_apart_within_a_share_of_a_core(
+        move, default_cell):
+    # Stops that took 2.5 times what a share of a core allows between two moments: every
+    # third moment is made, and a request is followed at most three moments before it brakes.
+    prepared = PreparedStops(move, default_cell.robot)
+    assert prepared.stride == 1
+    prepared._making = [4, 4 * 2.5 * prepared_stops.SHARE * EVERY]
+    assert prepared.stride == 3
+    index = prepared.wanted(0.3)
+    assert index % 3 == 0 and 0.3 < index * EVERY <= 0.3 + 3 * EVERY
+    prepared.make(index)
+    assert prepared.wanted(0.3) == index + 3
+    for at in ((index - 2.5) * EVERY, index * EVERY):
+        assert prepared.ahead_of(at).trajectory.timing.states[0, 0] == index * EVERY
+    assert prepared.ahead_of((index - 3.5) * EVERY) is None

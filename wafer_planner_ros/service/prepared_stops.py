@@ -4,13 +4,19 @@ Controlled stops made before they are asked for: a moving robot's stops, a few m
 A stop request wants its answer at once (the robot moves on meanwhile), and finding a
 controlled stop (``trajectory.stopping``) takes from a few to some tens of milliseconds.
 So while a published move runs, its stops are made ahead: ``PreparedStops`` holds the
-stops of one move from the moments ``EVERY`` s apart (0, EVERY, 2 EVERY, ...), made in
-the order the move reaches them, from where it is (``wanted``), ``AHEAD`` s ahead at most.
-A request to stop at ``at`` then takes the stop of the first of those moments at or after
-``at``, if it is made (``ahead_of``): the answer follows the move from ``at`` to that
-moment (at most ``EVERY`` s) and brakes from there as that stop does (``Planner.stop``'s
-``ahead``; the rest of the move where that is sooner), verified as every stop is. A moment
-not yet made is found for ``at`` itself, as without this.
+stops of one move from moments ``EVERY`` s apart (0, EVERY, 2 EVERY, ...), made in the
+order the move reaches them, from where it is (``wanted``), ``AHEAD`` s ahead at most.
+A request to stop at ``at`` then takes the stop of the first moment made at or after
+``at`` within a stride (``ahead_of``): the answer follows the move from ``at`` to that
+moment and brakes from there as that stop does (``Planner.stop``'s ``ahead``; the rest of
+the move where that is sooner), verified as every stop is. A moment not yet made is found
+for ``at`` itself, as without this.
+
+Making them costs a core's time in proportion to how long a stop takes to make (``made_s``,
+its mean so far) over the time between two moments made: where stops take long (a move
+through the ports, ~20 ms each), only every ``stride``-th moment is made, so that making
+them keeps to ``SHARE`` of a core; a request is then followed at most a stride of
+moments before it brakes.
 
 The stops are made with the move's own limit set and kept only while they are ahead of
 the move (``forget_before``); nothing here is published: each is a draft of an answer,
@@ -19,15 +25,18 @@ verified when it is one.
 
 import math
 import threading
+import time
 from typing import Dict, Optional
 
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.trajectory.stopping import controlled_stop, Stop
 
 EVERY = 0.02
-"""s of a move between the moments whose stops are made ahead."""
+"""s of a move between the moments whose stops may be made ahead."""
 AHEAD = 0.5
 """s of a move ahead of where it is whose stops are made."""
+SHARE = 0.5
+"""The share of a core that making stops ahead keeps to, moving in real time (the stride)."""
 
 
 class PreparedStops:
@@ -39,6 +48,17 @@ class PreparedStops:
         self._lock = threading.Lock()
         self._made: Dict[int, Optional[Stop]] = {}
         """moment index -> its stop (None: none there, e.g. the move rests)."""
+        self._making = [0, 0.0]
+        """Stops made, the seconds that took."""
+
+    @property
+    def stride(self) -> int:
+        """Return every how many moments one is made (1 until one has been)."""
+        with self._lock:
+            made, seconds = self._making
+        if not made:
+            return 1
+        return max(1, int(math.ceil(seconds / made / (SHARE * EVERY))))
 
     @property
     def count(self) -> int:
@@ -53,31 +73,46 @@ class PreparedStops:
         The first moment after ``elapsed`` not yet made, no further than ``AHEAD`` ahead
         and strictly inside the move.
         """
+        stride = self.stride
         first = max(int(math.floor(max(elapsed, 0.0) / EVERY)) + 1, 1)
+        first += -first % stride
         last = min(int(math.floor((elapsed + AHEAD) / EVERY)),
                    int(math.ceil(self.trajectory.duration / EVERY)) - 1)
         with self._lock:
-            for index in range(first, last + 1):
+            for index in range(first, last + 1, stride):
                 if index not in self._made:
                     return index
         return None
 
     def make(self, index: int) -> None:
         """Make the stop from moment ``index`` (``controlled_stop``) and hold it."""
+        begun = time.perf_counter()
         try:
             stop = controlled_stop(self.trajectory, index * EVERY, self.robot)
         except PlanningError:
             stop = None  # at rest there: a request there is refused as it would be anyway
         with self._lock:
             self._made[index] = stop
+            self._making[0] += 1
+            self._making[1] += time.perf_counter() - begun
 
     def ahead_of(self, at: float) -> Optional[Stop]:
-        """Return the stop made from the first moment at or after ``at``; None: not made."""
+        """
+        Return the stop made from the first moment at or after ``at``; None: not made.
+
+        Within a stride of moments (``stride``): a request is followed no further.
+        """
         index = int(math.ceil(at / EVERY))
-        if index * EVERY < at:  # rounding
+        if index > 0 and (index - 1) * EVERY >= at:  # rounding, either way
+            index -= 1
+        elif index * EVERY < at:
             index += 1
+        stride = self.stride
         with self._lock:
-            return self._made.get(index)
+            for moment in range(index, index + stride):
+                if moment in self._made:
+                    return self._made[moment]
+        return None
 
     def forget_before(self, elapsed: float) -> None:
         """Drop the stops of the moments the move has passed (``elapsed`` s along)."""
