@@ -117,6 +117,28 @@ def test_stop_requests_are_recorded_and_replayed(harness, roadmap_cache, capsys,
     assert '0 not compared' in out, out
 
 
+def test_with_no_share_of_a_core_for_it_no_stop_is_made_ahead(harness):
+    from rclpy.parameter import Parameter
+    node = harness.node
+    bad = node.set_parameters([Parameter('stops.ahead_share', value=1.5)])[0]
+    assert not bad.successful and 'stops.ahead_share' in bad.reason
+    assert node.set_parameters([Parameter('stops.ahead_share', value=0.0)])[0].successful
+    try:
+        harness.send_stations({'id': 'm8', 'from': 'loadport2', 'to': 'loadlock1'})
+        assert values(harness.result('m8'))['code'] == 'OK'
+        wait_for(lambda: any(t.header.frame_id == 'm8' for t in harness.trajectories), 10)
+        sent = next(t for t in harness.trajectories if t.header.frame_id == 'm8')
+        began = sent.header.stamp.sec + 1e-9 * sent.header.stamp.nanosec
+        for k in range(3):
+            time.sleep(0.2)
+            at = time.time() - began + 0.1
+            harness.send_stop({'id': f's8-{k}', 'trajectory': 'm8', 'at': at})
+            got = values(harness.result(f's8-{k}'))
+            assert got['code'] == 'OK' and float(got['braking_from']) == at
+    finally:
+        node.set_parameters([Parameter('stops.ahead_share', value=0.5)])
+
+
 def _stopped_ahead(harness, request_id: str, cell, roadmap) -> str:
     """
     Have a running move stopped a little ahead of where it is, until a stop made ahead answers.

@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.planner import Planner
-from wafer_planner_ros.service import prepared_stops
 from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY, PreparedStops
 from wafer_planner_ros.trajectory.stopping import controlled_stop
 
@@ -15,12 +14,11 @@ def move(default_cell, default_roadmap):
 
 
 def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_passed(
-        move, default_cell, monkeypatch):
-    monkeypatch.setattr(prepared_stops, 'SHARE', 1e9)  # every moment, however long it takes
+        move, default_cell):
     prepared = PreparedStops(move, default_cell.robot)
     elapsed = 0.5
     made = []
-    while (index := prepared.wanted(elapsed)) is not None:
+    while (index := prepared.wanted(elapsed, share=1e9)) is not None:  # every moment
         prepared.make(index)
         made.append(index)
     # Every moment after where the move is, up to AHEAD ahead, once and in order.
@@ -29,16 +27,17 @@ def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_pass
     # A request a little ahead gets the first moment's stop at or after it, the same stop
     # the core makes there; none before the move got there, or past what was made.
     at = elapsed + 0.031
-    ahead = prepared.ahead_of(at)
+    ahead = prepared.ahead_of(at, share=1e9)
     moment = ahead.trajectory.timing.states[0, 0]
     assert at <= moment < at + EVERY
     assert ahead.trajectory.duration == controlled_stop(move, moment,
                                                         default_cell.robot).trajectory.duration
-    assert prepared.ahead_of(elapsed - 0.1) is None
-    assert prepared.ahead_of(elapsed + AHEAD + 0.05) is None
+    assert prepared.ahead_of(elapsed - 0.1, share=1e9) is None
+    assert prepared.ahead_of(elapsed + AHEAD + 0.05, share=1e9) is None
     # Moments passed are forgotten; what is ahead is kept.
     prepared.forget_before(elapsed + 0.2)
-    assert prepared.ahead_of(at) is None and prepared.ahead_of(elapsed + 0.25) is not None
+    assert prepared.ahead_of(at, share=1e9) is None
+    assert prepared.ahead_of(elapsed + 0.25, share=1e9) is not None
     assert prepared.count == len([k for k in made if k * EVERY >= elapsed + 0.2])
 
 
@@ -54,13 +53,13 @@ def test_stops_that_take_long_to_make_are_made_a_stride_apart_within_a_share_of_
     # Stops that took 2.5 times what a share of a core allows between two moments: every
     # third moment is made, and a request is followed at most three moments before it brakes.
     prepared = PreparedStops(move, default_cell.robot)
-    assert prepared.stride == 1
-    prepared._making = [4, 4 * 2.5 * prepared_stops.SHARE * EVERY]
-    assert prepared.stride == 3
-    index = prepared.wanted(0.3)
+    assert prepared.stride(0.5) == 1
+    prepared._making = [4, 4 * 2.5 * 0.5 * EVERY]
+    assert prepared.stride(0.5) == 3 and prepared.stride(1.0) == 2
+    index = prepared.wanted(0.3, 0.5)
     assert index % 3 == 0 and 0.3 < index * EVERY <= 0.3 + 3 * EVERY
     prepared.make(index)
-    assert prepared.wanted(0.3) == index + 3
+    assert prepared.wanted(0.3, 0.5) == index + 3
     for at in ((index - 2.5) * EVERY, index * EVERY):
-        assert prepared.ahead_of(at).trajectory.timing.states[0, 0] == index * EVERY
-    assert prepared.ahead_of((index - 3.5) * EVERY) is None
+        assert prepared.ahead_of(at, 0.5).trajectory.timing.states[0, 0] == index * EVERY
+    assert prepared.ahead_of((index - 3.5) * EVERY, 0.5) is None

@@ -19,8 +19,10 @@ planning thread like any plan.
 
 While a kept trajectory runs (its stamp passed, its end not yet: the latest such), a
 thread of its own makes its stops ahead of it (``service.prepared_stops``) whenever no
-stop request is waiting or answered, so that a request is answered from one made ahead,
-the move followed to it first (at most ``prepared_stops.EVERY`` s).
+stop request is waiting or answered, within the share of a core ``stops.ahead_share``
+allows (0: none), so that a request is answered from one made ahead, the move followed to
+it first (at most ``prepared_stops.EVERY`` s where making them fits the share, a stride of
+such moments where it does not).
 """
 
 from collections import deque, OrderedDict
@@ -44,15 +46,16 @@ class Stops:
     """The kept trajectories and the stop-answering thread (see the module's description)."""
 
     def __init__(self, send: Callable, answer_error: Callable, answer_internal: Callable,
-                 logger, clock: Callable):
+                 logger, clock: Callable, share: Callable[[], float]):
         """
         Start the threads.
 
         ``send(*items)`` hands messages to the executor; ``answer_error`` and
         ``answer_internal`` are the worker's (one answer per query, counted there);
-        ``clock()`` is the node's time now, as the stamps are (``sec``, ``nanosec``).
+        ``clock()`` is the node's time now, as the stamps are (``sec``, ``nanosec``);
+        ``share()`` the share of a core making stops ahead may take now (0: none made).
         """
-        self._send, self._logger, self._clock = send, logger, clock
+        self._send, self._logger, self._clock, self._share = send, logger, clock, share
         self._answer_error, self._answer_internal = answer_error, answer_internal
         self._lock = threading.Condition()
         self._kept = OrderedDict()
@@ -142,9 +145,9 @@ class Stops:
                 kept = self._kept.get(request.trajectory)
                 prepared = self._prepared
                 self._answering = True
-            ahead = None
-            if prepared is not None and prepared[0] == request.trajectory:
-                ahead = prepared[1].ahead_of(request.at)
+            ahead, share = None, self._share()
+            if prepared is not None and prepared[0] == request.trajectory and share > 0.0:
+                ahead = prepared[1].ahead_of(request.at, share)
             try:
                 self._answer(number, request, received, kept, ahead)
             except Exception as exc:  # noqa: B902 - the thread outlives any one request
@@ -160,7 +163,8 @@ class Stops:
                     self._lock.wait()
                 if self._stopping:
                     return
-                running = self._running()
+                share = self._share()
+                running = self._running() if share > 0.0 else None
                 if running is not None and (self._prepared is None or
                                             self._prepared[0] != running[0]):
                     planner, result = self._kept[running[0]][:2]
@@ -172,7 +176,7 @@ class Stops:
                 index = None
                 if prepared is not None:
                     prepared[1].forget_before(running[1])
-                    index = prepared[1].wanted(running[1])
+                    index = prepared[1].wanted(running[1], share)
                 if index is None:
                     self._lock.wait(EVERY)
                     continue

@@ -81,7 +81,8 @@ class PlanningWorker:
         self.last_error = ''
         self._loader = RoadmapLoader(self.lock, settings, recording, send, self._logger, stamp,
                                      self._load_failed)
-        self.stops = Stops(send, self.answer_error, self.answer_internal, self._logger, stamp)
+        self.stops = Stops(send, self.answer_error, self.answer_internal, self._logger, stamp,
+                           lambda: self._settings().stops_ahead_share)
         """The published trajectories and the stop requests' own thread (``stops``)."""
         self._threads = [threading.Thread(target=target, name=name, daemon=True) for name, target
                          in (('wafer_planner_worker', lambda: self._work(self._backlog)),

@@ -12,11 +12,11 @@ moment and brakes from there as that stop does (``Planner.stop``'s ``ahead``; th
 the move where that is sooner), verified as every stop is. A moment not yet made is found
 for ``at`` itself, as without this.
 
-Making them costs a core's time in proportion to how long a stop takes to make (``made_s``,
-its mean so far) over the time between two moments made: where stops take long (a move
-through the ports, ~20 ms each), only every ``stride``-th moment is made, so that making
-them keeps to ``SHARE`` of a core; a request is then followed at most a stride of
-moments before it brakes.
+Making them costs a core's time in proportion to how long a stop takes to make (its mean
+so far) over the time between two moments made: where stops take long (a move through
+the ports, ~20 ms each), only every ``stride``-th moment is made, so that making them
+keeps to a share of a core (``SHARE`` by default, the node's ``stops.ahead_share``); a
+request is then followed at most a stride of moments before it brakes.
 
 The stops are made with the move's own limit set and kept only while they are ahead of
 the move (``forget_before``); nothing here is published: each is a draft of an answer,
@@ -36,7 +36,7 @@ EVERY = 0.02
 AHEAD = 0.5
 """s of a move ahead of where it is whose stops are made."""
 SHARE = 0.5
-"""The share of a core that making stops ahead keeps to, moving in real time (the stride)."""
+"""The share of a core that making stops ahead keeps to by default (``stride``)."""
 
 
 class PreparedStops:
@@ -51,14 +51,17 @@ class PreparedStops:
         self._making = [0, 0.0]
         """Stops made, the seconds that took."""
 
-    @property
-    def stride(self) -> int:
-        """Return every how many moments one is made (1 until one has been)."""
+    def stride(self, share: float = SHARE) -> int:
+        """
+        Return every how many moments one is made to keep to ``share`` of a core (> 0).
+
+        1 until one has been made; then the mean time one took over ``share`` of ``EVERY``.
+        """
         with self._lock:
             made, seconds = self._making
         if not made:
             return 1
-        return max(1, int(math.ceil(seconds / made / (SHARE * EVERY))))
+        return max(1, int(math.ceil(seconds / made / (share * EVERY))))
 
     @property
     def count(self) -> int:
@@ -66,14 +69,14 @@ class PreparedStops:
         with self._lock:
             return len(self._made)
 
-    def wanted(self, elapsed: float) -> Optional[int]:
+    def wanted(self, elapsed: float, share: float = SHARE) -> Optional[int]:
         """
         Return the next moment (index) to make for a move ``elapsed`` s along; None: none.
 
-        The first moment after ``elapsed`` not yet made, no further than ``AHEAD`` ahead
-        and strictly inside the move.
+        The first moment after ``elapsed`` on the ``stride`` for ``share`` not yet made, no
+        further than ``AHEAD`` ahead and strictly inside the move.
         """
-        stride = self.stride
+        stride = self.stride(share)
         first = max(int(math.floor(max(elapsed, 0.0) / EVERY)) + 1, 1)
         first += -first % stride
         last = min(int(math.floor((elapsed + AHEAD) / EVERY)),
@@ -96,18 +99,19 @@ class PreparedStops:
             self._making[0] += 1
             self._making[1] += time.perf_counter() - begun
 
-    def ahead_of(self, at: float) -> Optional[Stop]:
+    def ahead_of(self, at: float, share: float = SHARE) -> Optional[Stop]:
         """
         Return the stop made from the first moment at or after ``at``; None: not made.
 
-        Within a stride of moments (``stride``): a request is followed no further.
+        Within a stride of moments (``stride`` for ``share``): a request is followed no
+        further.
         """
         index = int(math.ceil(at / EVERY))
         if index > 0 and (index - 1) * EVERY >= at:  # rounding, either way
             index -= 1
         elif index * EVERY < at:
             index += 1
-        stride = self.stride
+        stride = self.stride(share)
         with self._lock:
             for moment in range(index, index + stride):
                 if moment in self._made:

@@ -16,6 +16,7 @@ from wafer_planner_ros.cell.model import default_cell_path
 from wafer_planner_ros.planner import SAMPLE_PERIOD_RANGE
 from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR
 from wafer_planner_ros.roadmap.graph import MAX_NODES, MAX_SEED
+from wafer_planner_ros.service.prepared_stops import SHARE
 
 
 class Parameter(NamedTuple):
@@ -65,6 +66,11 @@ PARAMETERS: Tuple[Parameter, ...] = (
               'the corridor curve only', 0.0, 600.0),
     Parameter('planning.max_queue', 32,
               'requests waiting to be planned; more are answered BUSY', 1, 10000),
+    Parameter('stops.ahead_share', SHARE,
+              "share of a core spent making a running trajectory's controlled stops ahead of "
+              'it, so that a stop request is answered without finding one (it follows the '
+              'move to the moment made first, at most 20 ms where making them fits the '
+              'share, more where it does not); 0: off', 0.0, 1.0),
     Parameter('recording.enabled', True, 'record every query to MCAP'),
     Parameter('recording.directory', '~/.ros/wafer_planner/recordings',
               'where the recordings are written'),
@@ -132,6 +138,8 @@ class NodeSettings:
     """Clients the live view serves at once."""
     live_robot: str = '/wafer_sim'
     """The robot node the live view shows (``node.live_robot``), absolute; '': none."""
+    stops_ahead_share: float = SHARE
+    """The share of a core making stops ahead may take (``prepared_stops``); 0: off."""
 
 
 def check(name: str, value) -> None:
@@ -188,7 +196,8 @@ def settings_from(values: Mapping[str, Any]) -> NodeSettings:
         frame_id=merged['markers.frame_id'],
         live_port=merged['live.port'], live_host=merged['live.host'].strip(),
         live_max_clients=merged['live.max_clients'],
-        live_robot=_absolute(merged['live.robot'].strip()))
+        live_robot=_absolute(merged['live.robot'].strip()),
+        stops_ahead_share=float(merged['stops.ahead_share']))
 
 
 def _absolute(name: str) -> str:
