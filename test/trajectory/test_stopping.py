@@ -14,7 +14,7 @@ from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
 from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.retimed import Retimed
-from wafer_planner_ros.trajectory.stopping import controlled_stop, hold_demand
+from wafer_planner_ros.trajectory.stopping import controlled_stop, hold_demand, Stop
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 STEP = 1e-4
@@ -188,6 +188,23 @@ def test_a_stop_made_ahead_follows_the_move_to_its_moment_then_brakes_as_it_does
         planner.stop(move, at + 0.02, 'r1', ahead=made)
     with pytest.raises(ValueError):
         planner.stop(moves['port'].trajectory, at, 'r1', ahead=made)
+
+
+def test_a_stop_made_ahead_that_fails_its_verification_is_not_the_answer(planner, moves):
+    # Its timing 1.2 x as fast: the move at the moment does not join it (sigma' 1 against
+    # 1.2). The answer is the stop found for the moment itself, and says so.
+    result = moves['station']
+    move, at = result.trajectory, 0.3 * result.trajectory.duration
+    made = controlled_stop(move, at + 0.013, planner.cell.robot)
+    timing = made.trajectory.timing
+    faster = Stop(Retimed(move, JerkProfile(timing.starts / 1.2, timing.jerks * 1.2 ** 3,
+                                            timing.states * [1.0, 1.2, 1.2 ** 2])),
+                  made.share, made.timing)
+    stop = planner.stop(move, at, 'r1', verified=result.verification, ahead=faster)
+    found = planner.stop(move, at, 'r1', verified=result.verification)
+    assert stop.verification.ok and stop.metrics['braking_from'] == at
+    assert stop.cycle_time == found.cycle_time and not found.metrics['refused']
+    assert len(stop.metrics['refused']) == 1 and 'ill-formed' in stop.metrics['refused'][0]
 
 
 @pytest.mark.parametrize('pair, fraction', [(('loadport3', 'loadlock1'), 6 / 40),

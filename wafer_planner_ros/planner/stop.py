@@ -19,7 +19,7 @@ from wafer_planner_ros.planner.endpoints import Endpoint
 from wafer_planner_ros.planner.result import answer, PlanResult
 from wafer_planner_ros.trajectory.chained import Chained
 from wafer_planner_ros.trajectory.stopping import controlled_stop, followed, moving_state
-from wafer_planner_ros.trajectory.stopping import Stop
+from wafer_planner_ros.trajectory.stopping import rest_of, Stop
 from wafer_planner_ros.trajectory.verify import Verification, verify
 
 METHOD = 'controlled-stop'
@@ -42,36 +42,51 @@ def stop(planner, trajectory, at: float, label: str,
     ``verified``: the verification ``trajectory`` passed when it was answered, held since
     (never one read back from a file): the stop keeps its path, so the stop's verification
     checks its limits and ends and takes the path's proof from it (``verify``'s ``base``);
-    None (or one without a proven path): the stop is verified whole. Raise PlanningError:
-    OUTSIDE_TRAJECTORY or AT_REST (``stopping.moving_state``), VERIFICATION_FAILED if the
-    stop fails its verification.
+    None (or one without a proven path): the stop is verified whole.
+
+    A stop that fails its verification is not the answer: the next of the stop made ahead
+    (followed), the stop found for ``at``, the rest of the move that is (the limits are
+    checked more densely while a stop is found, but on other instants than the
+    verification's, and a timing at its jerk limit may pass one and not the other by
+    1e-6). Raise PlanningError: OUTSIDE_TRAJECTORY or AT_REST
+    (``stopping.moving_state``), VERIFICATION_FAILED if none passes.
     """
     begun = time.perf_counter()
     q, qd, qdd = moving_state(trajectory, at)
-    made = controlled_stop(trajectory, at, planner.cell.robot) if ahead is None else \
-        followed(ahead, trajectory, at)
-    curve = made.trajectory
-    end = curve.evaluate([curve.duration])[0]
-    checked = time.perf_counter()
     base = verified if verified is not None and verified.proven else None
-    verification = verify(curve, planner.cell, q, end, moving=(qd, qdd), base=base)
-    if not verification.ok:
+    robot = planner.cell.robot
+    tries = [lambda: controlled_stop(trajectory, at, robot), lambda: rest_of(trajectory, at)]
+    if ahead is not None:
+        tries.insert(0, lambda: followed(ahead, trajectory, at))
+    problems, stop_s, verify_s, braking = [], 0.0, 0.0, float(at)
+    for number, make in enumerate(tries):
+        began = time.perf_counter()
+        made = make()
+        curve = made.trajectory
+        end = curve.evaluate([curve.duration])[0]
+        checked = time.perf_counter()
+        verification = verify(curve, planner.cell, q, end, moving=(qd, qdd), base=base)
+        stop_s, verify_s = stop_s + checked - began, verify_s + time.perf_counter() - checked
+        if verification.ok:
+            if number == 0 and ahead is not None:
+                braking = float(ahead.trajectory.timing.states[0, 0])
+            break
+        problems.append(f'{made.timing}: ' + '; '.join(verification.problems))
+    else:
         raise PlanningError(ErrorCode.VERIFICATION_FAILED,
                             f'the stop of {label} at {at:.6g} s failed its verification: '
-                            + '; '.join(verification.problems))
+                            + ' | '.join(problems))
     done = time.perf_counter()
     start = Endpoint(f'{label} at {at:.6g} s', ((None, q),))
     goal = Endpoint(f'{label} stopped', ((None, end),))
     return answer(planner, start, goal, q, end, (None, None), curve, curve.duration,
                   verification, q[None], q[None], {'stopped_at': float(at),
-                                                   'braking_from': float(
-                                                       at if ahead is None else
-                                                       ahead.trajectory.timing.states[0, 0]),
+                                                   'braking_from': braking,
                                                    'share': made.share,
-                                                   'timing': made.timing},
+                                                   'timing': made.timing,
+                                                   'refused': problems},
                   0, method=METHOD,
-                  timings_ms={'stop': 1e3 * (checked - begun),
-                              'verify': 1e3 * (done - checked),
+                  timings_ms={'stop': 1e3 * stop_s, 'verify': 1e3 * verify_s,
                               'total': 1e3 * (done - begun)})
 
 

@@ -115,7 +115,7 @@ def controlled_stop(trajectory: Trajectory, at: float, robot) -> Stop:
     braked = _braked(trajectory, at, robot, limits.acceleration, jerk, wafer)
     if braked is not None and braked.trajectory.duration < trajectory.duration - at:
         return braked
-    return _rest(trajectory, at)
+    return rest_of(trajectory, at)
 
 
 def followed(ahead: Stop, trajectory: Trajectory, at: float) -> Stop:
@@ -139,12 +139,12 @@ def followed(ahead: Stop, trajectory: Trajectory, at: float) -> Stop:
         return ahead
     coast = moment - at
     if ahead.timing == 'rest' or coast + timing.duration >= rest:
-        return _rest(trajectory, at)
+        return rest_of(trajectory, at)
     phases = _coasted((timing.starts, timing.jerks, timing.states), at, coast)
     return Stop(Retimed(trajectory, JerkProfile(*phases)), ahead.share, ahead.timing)
 
 
-def _rest(trajectory: Trajectory, at: float) -> Stop:
+def rest_of(trajectory: Trajectory, at: float) -> Stop:
     """Return the rest of ``trajectory`` from ``at`` as a stop (sigma = t): it ends at rest."""
     rest = trajectory.duration - at
     return Stop(Retimed(trajectory, JerkProfile(np.array([0.0, rest]), np.zeros(1), np.array(
