@@ -203,6 +203,25 @@ def eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step
 
 
 @kernel(nogil=True)
+def bisected(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, states,
+             low, high, low_eases):
+    """
+    Return (low, high) one state apart, between the ``low`` and ``high`` given.
+
+    Easing off keeps the limits from ``states[low]`` if ``low_eases`` (``eases_from``),
+    from ``states[high]`` if not; bisection keeps it so.
+    """
+    while high - low > 1:
+        middle = (low + high) // 2
+        if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step,
+                      states, middle) == low_eases:
+            low = middle
+        else:
+            high = middle
+    return low, high
+
+
+@kernel(nogil=True)
 def brake(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, halvings,
           begin, horizon, starts, jerks, states):
     """
@@ -248,13 +267,9 @@ def brake(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, hal
                               wafer, step, states, first):
                     break
                 before, gap = first, 2 * gap
-            while first <= made and first - before > 1:
-                middle = (before + first) // 2
-                if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
-                              step, states, middle):
-                    first = middle
-                else:
-                    before = middle
+            if first <= made:
+                before, first = bisected(grid, breaks, g1, g2, g3, w1, w2, acceleration,
+                                         jerk, wafer, step, states, before, first, False)
         if first > made:
             if ended != RESTED:
                 return made, ended  # past the samples or out of room, still braking
@@ -274,13 +289,8 @@ def brake(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer, step, hal
                 good, gap = probe, 2 * gap
             else:
                 bad = probe
-        while bad - good > 1:
-            middle = (good + bad) // 2
-            if eases_from(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
-                          step, states, middle):
-                good = middle
-            else:
-                bad = middle
+        good, bad = bisected(grid, breaks, g1, g2, g3, w1, w2, acceleration, jerk, wafer,
+                             step, states, good, bad, True)
         k = good
         if states[k + 1, 1] > 0.0:
             # Brake less in step k, as hard as still lets easing off keep every limit.
