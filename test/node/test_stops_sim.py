@@ -16,14 +16,18 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.planner import Planner
-from wafer_planner_ros.service.prepared_stops import EVERY
+from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY
 from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 START = 'loadport1'
 GOAL = 'loadlock2'
-LEAD = 1.0
+LEAD = 0.3
 """s between sending a stop request and the moment it stops at: the answer must come first
-(a stop takes tens to hundreds of ms on 2 cores, more under the whole suite)."""
+(milliseconds from a stop the node made ahead of the running move, which it does up to
+0.5 s ahead; tens of ms where it finds one, more under the whole suite)."""
+DIVERT_LEAD = 1.0
+"""s between sending a divert and the moment it leaves the move at: the divert plans the
+move from where the stop rests first."""
 
 
 @pytest.fixture(scope='module')
@@ -138,7 +142,10 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     # The core's stop there: braking from the moment the node's answer says (a stop made
     # ahead follows the move to its moment first, at most EVERY later).
     braking = float(values(result)['braking_from'])
-    assert at <= braking <= at + EVERY + 1e-9
+    # At ``at``, or at a moment made ahead: on the grid, within a stride of them (a
+    # moment or more where making them takes longer than the node's share of a core).
+    assert braking == at or (at < braking < at + AHEAD and
+                             abs(braking / EVERY - round(braking / EVERY)) < 1e-9)
     stop = planner.stop(move, at, request_id, ahead=None if braking == at else
                         controlled_stop(move, braking, planner.cell.robot))
     near = t >= at - 0.1
@@ -194,7 +201,7 @@ def test_a_moving_arm_diverted_follows_the_move_then_the_divert_without_a_jump(
     assert values(harness.result('go-divert'))['code'] == 'OK'
     sent = _published(harness, 'go-divert')
     began = _seconds(sent.header.stamp)
-    at = time.time() - began + LEAD
+    at = time.time() - began + DIVERT_LEAD
     harness.send_stations({'id': 'divert', 'from': {'trajectory': 'go-divert', 'at': at},
                            'to': 'loadlock1'})
     result = harness.result('divert')
