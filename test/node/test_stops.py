@@ -139,6 +139,25 @@ def test_with_no_share_of_a_core_for_it_no_stop_is_made_ahead(harness):
         node.set_parameters([Parameter('stops.ahead_share', value=0.5)])
 
 
+def test_a_trajectory_published_again_under_its_id_is_the_one_stopped(
+        harness, default_cell, default_roadmap):
+    # Stops made ahead of the first were made of another curve: the stop is the second's.
+    harness.send_stations({'id': 'm9', 'from': 'loadport1', 'to': 'loadlock2'})
+    wait_for(lambda: any(r.name == 'm9' for r in harness.results), 60)
+    time.sleep(0.3)  # stops made ahead of it meanwhile
+    harness.send_stations({'id': 'm9', 'from': 'loadport2', 'to': 'loadlock1'})
+    wait_for(lambda: sum(t.header.frame_id == 'm9' for t in harness.trajectories) == 2, 60)
+    second = [t for t in harness.trajectories if t.header.frame_id == 'm9'][-1]
+    time.sleep(0.2)  # stops made ahead of it meanwhile
+    at = time.time() - (second.header.stamp.sec + 1e-9 * second.header.stamp.nanosec) + 0.1
+    harness.send_stop({'id': 's9', 'trajectory': 'm9', 'at': at})
+    got = values(harness.result('s9'))
+    assert got['code'] == 'OK', harness.result('s9').message
+    _, q, _, _ = _trajectory(harness, 's9')
+    move = Planner(default_cell, default_roadmap).plan('loadport2', 'loadlock1').trajectory
+    assert np.array_equal(q[0], move.evaluate([at])[0])
+
+
 def _stopped_ahead(harness, request_id: str, cell, roadmap) -> str:
     """
     Have a running move stopped a little ahead of where it is, until a stop made ahead answers.

@@ -146,7 +146,9 @@ class Stops:
                 prepared = self._prepared
                 self._answering = True
             ahead, share = None, self._share()
-            if prepared is not None and prepared[0] == request.trajectory and share > 0.0:
+            # Made ahead of this very trajectory (an id published again names the last).
+            if prepared is not None and kept is not None and share > 0.0 and \
+                    prepared[1].trajectory is kept[1].trajectory:
                 ahead = prepared[1].ahead_of(request.at, share)
             try:
                 self._answer(number, request, received, kept, ahead)
@@ -165,13 +167,14 @@ class Stops:
                     return
                 share = self._share()
                 running = self._running() if share > 0.0 else None
-                if running is not None and (self._prepared is None or
-                                            self._prepared[0] != running[0]):
-                    planner, result = self._kept[running[0]][:2]
-                    self._prepared = (running[0], PreparedStops(result.trajectory,
-                                                                planner.cell.robot))
-                elif running is None:
+                if running is None:
                     self._prepared = None
+                else:
+                    planner, result = self._kept[running[0]][:2]
+                    if self._prepared is None or \
+                            self._prepared[1].trajectory is not result.trajectory:
+                        self._prepared = (running[0], PreparedStops(result.trajectory,
+                                                                    planner.cell.robot))
                 prepared = self._prepared
                 index = None
                 if prepared is not None:
@@ -183,10 +186,9 @@ class Stops:
             try:
                 prepared[1].make(index)
             except Exception as exc:  # noqa: B902 - the thread outlives any one stop
-                self._logger.error(f'stop ahead: {reason_of(exc)}')
-                with self._lock:
-                    self._prepared = None
-                    self._lock.wait(EVERY)
+                self._logger.error(f'stops ahead of {prepared[0]}: {reason_of(exc)}; none '
+                                   'made ahead of it any more')
+                prepared[1].give_up()
 
     def _running(self) -> Optional[Tuple[str, float]]:
         """Return (id, seconds along) of the latest kept trajectory running now, or None."""

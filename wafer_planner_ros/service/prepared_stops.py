@@ -50,6 +50,11 @@ class PreparedStops:
         """moment index -> its stop (None: none there, e.g. the move rests)."""
         self._making = [0, 0.0]
         """Stops made, the seconds that took."""
+        self._given_up = False
+
+    def give_up(self) -> None:
+        """Make no more stops of this move (one failed to be made: ``wanted`` says none)."""
+        self._given_up = True
 
     def stride(self, share: float = SHARE) -> int:
         """
@@ -76,6 +81,8 @@ class PreparedStops:
         The first moment after ``elapsed`` on the ``stride`` for ``share`` not yet made, no
         further than ``AHEAD`` ahead and strictly inside the move.
         """
+        if self._given_up:
+            return None
         stride = self.stride(share)
         first = max(int(math.floor(max(elapsed, 0.0) / EVERY)) + 1, 1)
         first += -first % stride
