@@ -14,9 +14,11 @@ for ``at`` itself, as without this.
 
 Making them costs a core's time in proportion to how long a stop takes to make (its mean
 so far) over the time between two moments made: where stops take long (a move through
-the ports, ~20 ms each), only every ``stride``-th moment is made, so that making them
-keeps to a share of a core (``SHARE`` by default, the node's ``stops.ahead_share``); a
-request is then followed at most a stride of moments before it brakes.
+the ports, ~20 ms each), only every ``stride``-th moment is made, so that keeping pace
+with the move takes about a share of a core (``SHARE`` by default, the node's
+``stops.ahead_share``; the moments up to ``AHEAD`` ahead of a move's start are made at
+once, as fast as a core allows); a request is then followed at most a stride of moments
+before it brakes.
 
 The stops are made with the move's own limit set and kept only while they are ahead of
 the move (``forget_before``); nothing here is published: each is a draft of an answer,
