@@ -65,7 +65,9 @@ def stop(planner, trajectory, at: float, label: str,
         curve = made.trajectory
         end = curve.evaluate([curve.duration])[0]
         checked = time.perf_counter()
-        verification = verify(curve, planner.cell, q, end, moving=(qd, qdd), base=base)
+        # The path's proof is ``verified``'s only for a stop played along that very curve.
+        verification = verify(curve, planner.cell, q, end, moving=(qd, qdd),
+                              base=base if curve.base is trajectory else None)
         stop_s, verify_s = stop_s + checked - began, verify_s + time.perf_counter() - checked
         if verification.ok:
             if number == 0 and ahead is not None:
