@@ -52,7 +52,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import PlanningError
-from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.node.qos import RELIABLE
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.recording.reading import read
 from wafer_planner_ros.roadmap.cache import load_or_build

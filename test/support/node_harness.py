@@ -17,7 +17,8 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
-from wafer_planner_ros.node.planner_node import LATCHED, RELIABLE, WaferPlannerNode
+from wafer_planner_ros.node.planner_node import WaferPlannerNode
+from wafer_planner_ros.node.qos import LATCHED, RELIABLE
 
 RESEND = 5.0
 """Seconds a service call waits for its answer before it is sent again."""

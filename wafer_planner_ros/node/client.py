@@ -20,7 +20,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from wafer_planner_ros.errors import WaferPlannerError
-from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.node.qos import RELIABLE
 
 DISCOVERY = 10.0
 """s within which discovery finds a running node on the same domain (a small part of this

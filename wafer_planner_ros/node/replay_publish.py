@@ -20,7 +20,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from wafer_planner_ros.errors import WaferPlannerError
 from wafer_planner_ros.node.client import PlannerPeer
-from wafer_planner_ros.node.planner_node import RELIABLE
+from wafer_planner_ros.node.qos import RELIABLE
 from wafer_planner_ros.recording.compare import judge, OK, Row, row_for
 from wafer_planner_ros.recording.queries import Query
 

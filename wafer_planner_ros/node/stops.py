@@ -43,7 +43,7 @@ KEPT = 256
 
 
 class Stops:
-    """The kept trajectories and the stop-answering thread (see the module's description)."""
+    """The kept trajectories, the stop-answering thread and the one making stops ahead."""
 
     def __init__(self, send: Callable, answer_error: Callable, answer_internal: Callable,
                  logger, clock: Callable, share: Callable[[], float]):
