@@ -11,7 +11,6 @@ from std_msgs.msg import String
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY
 from wafer_planner_ros.trajectory.methods import WholeCurve
-from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 
 def _trajectory(harness, request_id: str):
@@ -172,7 +171,8 @@ def _stopped_ahead(harness, request_id: str, cell, roadmap) -> str:
     sent = next(t for t in harness.trajectories if t.header.frame_id == request_id)
     began = sent.header.stamp.sec + 1e-9 * sent.header.stamp.nanosec
     planner = Planner(cell, roadmap)
-    move = planner.plan('loadport2', 'loadlock1').trajectory
+    planned = planner.plan('loadport2', 'loadlock1')
+    move = planned.trajectory
     for k in range(20):
         time.sleep(0.1)
         at = time.time() - began + 0.1
@@ -188,8 +188,9 @@ def _stopped_ahead(harness, request_id: str, cell, roadmap) -> str:
         assert braking == at or (at < braking < at + AHEAD and
                                  abs(braking / EVERY - round(braking / EVERY)) < 1e-9)
         if braking > at:
-            made = controlled_stop(move, braking, cell.robot)
-            expected = planner.stop(move, at, request_id, ahead=made)
+            made = planner.prepare_stop(move, braking, planned.verification)
+            expected = planner.stop(move, at, request_id, verified=planned.verification,
+                                    ahead=made)
             assert float(got['cycle_time']) == expected.cycle_time
             times, q, qd, qdd = _trajectory(harness, stop_id)
             state = [x[0] for x in move.evaluate_orders([at], range(3))]

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.planner.stop import Prepared
 from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY
 from wafer_planner_ros.trajectory.stopping import controlled_stop
 
@@ -147,7 +148,8 @@ def test_a_moving_arm_stopped_on_its_path_is_continuous_and_within_its_limits(
     assert braking == at or (at < braking < at + AHEAD and
                              abs(braking / EVERY - round(braking / EVERY)) < 1e-9)
     stop = planner.stop(move, at, request_id, ahead=None if braking == at else
-                        controlled_stop(move, braking, planner.cell.robot))
+                        Prepared(controlled_stop(move, braking, planner.cell.robot), None,
+                                 None))
     near = t >= at - 0.1
     dt = np.diff(t[near])[:, None]
     assert np.all(np.abs(np.diff(q[near], axis=0)) <= limits.velocity * dt * (1 + 1e-6) + 1e-9)

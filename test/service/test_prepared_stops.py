@@ -9,13 +9,28 @@ from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 
 @pytest.fixture(scope='module')
-def move(default_cell, default_roadmap):
-    return Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2').trajectory
+def planner(default_cell, default_roadmap):
+    return Planner(default_cell, default_roadmap)
+
+
+@pytest.fixture(scope='module')
+def planned(planner):
+    return planner.plan('loadport1', 'loadlock2')
+
+
+@pytest.fixture(scope='module')
+def move(planned):
+    return planned.trajectory
+
+
+@pytest.fixture
+def maker(planner, planned):
+    return lambda moment: planner.prepare_stop(planned.trajectory, moment, planned.verification)
 
 
 def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_passed(
-        move, default_cell):
-    prepared = PreparedStops(move, default_cell.robot)
+        move, default_cell, maker):
+    prepared = PreparedStops(move, maker)
     elapsed = 0.5
     made = []
     while (index := prepared.wanted(elapsed, share=1e9)) is not None:  # every moment
@@ -28,10 +43,12 @@ def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_pass
     # the core makes there; none before the move got there, or past what was made.
     at = elapsed + 0.031
     ahead = prepared.ahead_of(at, share=1e9)
-    moment = ahead.trajectory.timing.states[0, 0]
+    moment = ahead.stop.trajectory.timing.states[0, 0]
     assert at <= moment < at + EVERY
-    assert ahead.trajectory.duration == controlled_stop(move, moment,
-                                                        default_cell.robot).trajectory.duration
+    assert ahead.stop.trajectory.duration == controlled_stop(
+        move, moment, default_cell.robot).trajectory.duration
+    # Verified as it was made, its path's proof the move's.
+    assert ahead.stop.timing == 'rest' or (ahead.verification.ok and ahead.verification.on_base)
     assert prepared.ahead_of(elapsed - 0.1, share=1e9) is None
     assert prepared.ahead_of(elapsed + AHEAD + 0.05, share=1e9) is None
     # Moments passed are forgotten; what is ahead is kept.
@@ -41,18 +58,18 @@ def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_pass
     assert prepared.count == len([k for k in made if k * EVERY >= elapsed + 0.2])
 
 
-def test_no_moment_is_wanted_at_or_past_the_move_s_end(move, default_cell):
-    prepared = PreparedStops(move, default_cell.robot)
+def test_no_moment_is_wanted_at_or_past_the_move_s_end(move, maker):
+    prepared = PreparedStops(move, maker)
     assert prepared.wanted(move.duration) is None
     last = prepared.wanted(move.duration - 0.5 * EVERY)
     assert last is None or last * EVERY < move.duration
 
 
 def test_stops_that_take_long_to_make_are_made_a_stride_apart_within_a_share_of_a_core(
-        move, default_cell):
+        move, maker):
     # Stops that took 2.5 times what a share of a core allows between two moments: every
     # third moment is made, and a request is followed at most three moments before it brakes.
-    prepared = PreparedStops(move, default_cell.robot)
+    prepared = PreparedStops(move, maker)
     assert prepared.stride(0.5) == 1
     prepared._making = [4, 4 * 2.5 * 0.5 * EVERY]
     assert prepared.stride(0.5) == 3 and prepared.stride(1.0) == 2
@@ -61,5 +78,5 @@ def test_stops_that_take_long_to_make_are_made_a_stride_apart_within_a_share_of_
     prepared.make(index)
     assert prepared.wanted(0.3, 0.5) == index + 3
     for at in ((index - 2.5) * EVERY, index * EVERY):
-        assert prepared.ahead_of(at, 0.5).trajectory.timing.states[0, 0] == index * EVERY
+        assert prepared.ahead_of(at, 0.5).stop.trajectory.timing.states[0, 0] == index * EVERY
     assert prepared.ahead_of((index - 3.5) * EVERY, 0.5) is None

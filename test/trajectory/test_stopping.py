@@ -6,16 +6,20 @@ move's at the times its timing maps to, its wafer acceleration is taken from sec
 differences of wafer-centre positions and its jerk from differences of its acceleration.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.planner.stop import Prepared
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
 from wafer_planner_ros.trajectory.methods import WholeCurve
 from wafer_planner_ros.trajectory.retimed import Retimed
-from wafer_planner_ros.trajectory.stopping import controlled_stop, hold_demand, Stop
-from wafer_planner_ros.trajectory.verify import Verification, verify
+from wafer_planner_ros.trajectory.stopping import followed, hold_demand, Stop
+from wafer_planner_ros.trajectory.verify import limit_ratios, Verification, verify
+from wafer_planner_ros.trajectory.verify import verify_joined
 
 STEP = 1e-4
 """s between the independent checks."""
@@ -163,12 +167,22 @@ def test_a_stop_of_a_verified_move_is_verified_on_its_path_and_in_its_own_limits
 def test_a_stop_made_ahead_follows_the_move_to_its_moment_then_brakes_as_it_does(
         planner, moves):
     result = moves['station']
-    move, robot = result.trajectory, planner.cell.robot
+    move = result.trajectory
     at = 0.3 * move.duration
-    made = controlled_stop(move, at + 0.013, robot)
+    made = planner.prepare_stop(move, at + 0.013, result.verification)
+    assert made.verification.ok and made.verification.on_base
     stop = planner.stop(move, at, 'r1', verified=result.verification, ahead=made)
     curve = stop.trajectory
     assert stop.verification.ok and stop.metrics['braking_from'] == at + 0.013
+    # Checked anew: the 13 ms followed and the join; the stop made ahead when it was made.
+    whole = planner.stop(move, at, 'r1', ahead=made)  # no proof to follow: verified whole
+    assert made.verification.limit_samples < stop.verification.limit_samples \
+        <= made.verification.limit_samples + 15
+    assert whole.verification.ok and not whole.verification.on_base
+    for name, ratio in whole.verification.ratios.items():
+        assert stop.verification.ratios[name] == pytest.approx(ratio, rel=1e-3, abs=1e-9)
+    for name in ('joint_path_length', 'wafer_path_length'):
+        assert stop.metrics[name] == pytest.approx(whole.metrics[name], rel=1e-4)
     assert planner.stop(move, at, 'r1').metrics['braking_from'] == at
     q, qd, qdd = (x[0] for x in move.evaluate_orders([at], range(3)))
     s_q, s_qd, s_qdd = (x[0] for x in curve.evaluate_orders([0.0], range(3)))
@@ -177,10 +191,10 @@ def test_a_stop_made_ahead_follows_the_move_to_its_moment_then_brakes_as_it_does
     # The move until the moment, then the stop made there.
     t = np.linspace(0.0, 0.013, 14)
     assert np.abs(curve.evaluate(t) - move.evaluate(at + t)).max() <= 1e-12
-    later = np.linspace(0.0, made.trajectory.duration, 50)
-    assert np.abs(curve.evaluate(0.013 + later) - made.trajectory.evaluate(later)).max() \
-        <= 1e-9
-    assert curve.duration == pytest.approx(0.013 + made.trajectory.duration, abs=1e-12)
+    braked = made.stop.trajectory
+    later = np.linspace(0.0, braked.duration, 50)
+    assert np.abs(curve.evaluate(0.013 + later) - braked.evaluate(later)).max() <= 1e-9
+    assert curve.duration == pytest.approx(0.013 + braked.duration, abs=1e-12)
     for limit, ratio in _independent(planner.cell, curve, move).items():
         assert ratio <= 1.0 + 1e-6, f'{limit} at {ratio} x its limit'
     # Made from before the moment, or of another curve: refused.
@@ -190,16 +204,49 @@ def test_a_stop_made_ahead_follows_the_move_to_its_moment_then_brakes_as_it_does
         planner.stop(moves['port'].trajectory, at, 'r1', ahead=made)
 
 
+def test_a_joined_verification_checks_the_stretch_followed_and_the_join(planner, moves):
+    result = moves['station']
+    move, cell, at = result.trajectory, planner.cell, 0.3 * result.trajectory.duration
+    made = planner.prepare_stop(move, at + 0.013, result.verification)
+    curve = followed(made.stop, move, at).trajectory
+    q, qd, qdd = (x[0] for x in move.evaluate_orders([at], range(3)))
+    end = curve.evaluate([curve.duration])[0]
+    then = (made.stop.trajectory, made.verification)
+    assert verify_joined(curve, cell, q, end, (qd, qdd), result.verification, 0.013, then).ok
+    # Joined to another stop than the one it goes on as: refused.
+    other = planner.prepare_stop(move, at + 0.02, result.verification)
+    checked = verify_joined(curve, cell, q, end, (qd, qdd), result.verification, 0.013,
+                            (other.stop.trajectory, other.verification))
+    assert any('verified stop it joins' in p for p in checked.problems)
+    # Another start motion than the move's: refused as ``verify`` refuses it.
+    checked = verify_joined(curve, cell, q, end, (qd * 1.01, qdd), result.verification,
+                            0.013, then)
+    assert any('the motion it continues' in p for p in checked.problems)
+    # The stretch's limits are what is checked anew: with the stop's figures blanked, the
+    # figures are the move's over those 13 ms.
+    blank = dataclasses.replace(made.verification, peak_jerk=(0.0,) * len(qd),
+                                ratios=dict.fromkeys(made.verification.ratios, 0.0))
+    checked = verify_joined(curve, cell, q, end, (qd, qdd), result.verification, 0.013,
+                            (made.stop.trajectory, blank))
+    stretch = Retimed(move, JerkProfile(np.array([0.0, 0.013]), np.zeros(1),
+                                        np.array([[at, 1.0, 0.0], [at + 0.013, 1.0, 0.0]])))
+    assert checked.ok and checked.ratios == limit_ratios(stretch, cell.robot)
+    assert max(checked.ratios.values()) > 0.0
+    with pytest.raises(ValueError):  # a stop made ahead that is not verified
+        verify_joined(curve, cell, q, end, (qd, qdd), result.verification, 0.013,
+                      (made.stop.trajectory, Verification(problems=('no',))))
+
+
 def test_a_stop_made_ahead_that_fails_its_verification_is_not_the_answer(planner, moves):
     # Its timing 1.2 x as fast: the move at the moment does not join it (sigma' 1 against
     # 1.2). The answer is the stop found for the moment itself, and says so.
     result = moves['station']
     move, at = result.trajectory, 0.3 * result.trajectory.duration
-    made = controlled_stop(move, at + 0.013, planner.cell.robot)
-    timing = made.trajectory.timing
-    faster = Stop(Retimed(move, JerkProfile(timing.starts / 1.2, timing.jerks * 1.2 ** 3,
-                                            timing.states * [1.0, 1.2, 1.2 ** 2])),
-                  made.share, made.timing)
+    made = planner.prepare_stop(move, at + 0.013, result.verification)
+    timing = made.stop.trajectory.timing
+    faster = Prepared(Stop(Retimed(move, JerkProfile(
+        timing.starts / 1.2, timing.jerks * 1.2 ** 3, timing.states * [1.0, 1.2, 1.2 ** 2])),
+        made.stop.share, made.stop.timing), made.verification, made.lengths)
     stop = planner.stop(move, at, 'r1', verified=result.verification, ahead=faster)
     found = planner.stop(move, at, 'r1', verified=result.verification)
     assert stop.verification.ok and stop.metrics['braking_from'] == at

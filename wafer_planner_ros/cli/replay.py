@@ -32,7 +32,6 @@ from wafer_planner_ros.roadmap.cache import DEFAULT_CACHE_DIR, load_or_build
 from wafer_planner_ros.roadmap.graph import RoadmapSettings
 from wafer_planner_ros.service.planning import PlanningService, within_budget
 from wafer_planner_ros.service.requests import Moving, request_of, RequestError, stop_request
-from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 
 class Replayer:
@@ -178,9 +177,9 @@ def _ahead(planner, move, at: float, query: Query):
         moment = float(braking)
     except (TypeError, ValueError):
         return None
-    if not at < moment < move.trajectory.duration:
+    if not (at < moment < move.trajectory.duration and move.verification.proven):
         return None
-    return controlled_stop(move.trajectory, moment, planner.for_load(move.load).cell.robot)
+    return planner.prepare_stop(move.trajectory, moment, move.verification, move.load)
 
 
 def main(argv=None) -> int:

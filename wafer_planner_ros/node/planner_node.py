@@ -5,17 +5,20 @@ Threads: a single-threaded executor (subscriptions, services, the diagnostics ti
 publishing: every callback is short), the worker's four (``worker``: one plans, one request
 at a time; one answers the station pairs the table holds; a watchdog answers ``TIMEOUT`` at
 every deadline; its loader's, ``loader``, loads or rebuilds the roadmap while the previous
-one serves; the compiled kernels release the GIL), the one loading the kernels from the
+one serves; the compiled kernels release the GIL), the stops' two (``stops``: one takes
+the stop requests on a node and executor of its own, ``stop_requests``, and answers them
+there; one makes stops ahead of the running move), the one loading the kernels from the
 process's start (``startup``; with one more saying when they are being compiled, if they
 must be), the recorder's (``node.recording``) and, with ``live.port`` set, the Foxglove
 server's (``live``, ``live_server``). Requests are handed to the recording (which writes each
 with its answers, a query whole in one file), read and checked in the subscription
-callback, then handed to the worker. The
-worker hands every answer back through a guard condition, so all publishing happens on the
-executor, each answer recorded before it goes out; each request gets exactly one
-``~/result``, whatever happens: no request, however malformed, and no failure while
-answering it ends the node (a failure of the node's own is answered ``INTERNAL``). What
-``/diagnostics`` says is ``health``'s; recording switched on and off, ``recording_switch``'s.
+callback, then handed to the worker. The worker hands every answer back through a guard
+condition, so all its publishing happens on the executor; the stop thread publishes its
+answers itself (``_deliver_now``), at once. Each answer is recorded before it goes out;
+each request gets exactly one ``~/result``, whatever happens: no request, however
+malformed, and no failure while answering it ends the node (a failure of the node's own
+is answered ``INTERNAL``). What ``/diagnostics`` says is ``health``'s; recording switched
+on and off, ``recording_switch``'s.
 """
 
 from collections import deque
@@ -56,6 +59,7 @@ from wafer_planner_ros.node.qos import LATCHED, RELIABLE
 from wafer_planner_ros.node.recording import limits_of, NodeRecording
 from wafer_planner_ros.node.recording_switch import RecordingSwitch
 from wafer_planner_ros.node.startup import core_warnings_to, load_kernels
+from wafer_planner_ros.node.stop_requests import StopRequests
 from wafer_planner_ros.node.worker import PlanningWorker
 from wafer_planner_ros.recording.bag import qos, Topic
 from wafer_planner_ros.service.requests import request_id_of, request_of, RequestError
@@ -114,15 +118,15 @@ class WaferPlannerNode(Node):
             JointTrajectory, '~/plan_request', self._on_joint_request, RELIABLE, raw=True)
         self._station_sub = self.create_subscription(
             String, '~/plan_station_request', self._on_station_request, RELIABLE, raw=True)
-        self._stop_sub = self.create_subscription(
-            String, '~/stop_request', self._on_stop_request, RELIABLE, raw=True)
+        # Stop requests on a node and thread of their own, answered there (``stops``).
+        self._stop_requests = StopRequests(self, self._on_stop_request)
         self._numbers = itertools.count(1)
         self._late_records = 0
         self._recording = NodeRecording(self.get_name(), [
             Topic(self._joint_sub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
                   RELIABLE_OFFERED),
             Topic(self._station_sub.topic_name, 'std_msgs/msg/String', RELIABLE_OFFERED),
-            Topic(self._stop_sub.topic_name, 'std_msgs/msg/String', RELIABLE_OFFERED),
+            Topic(self._stop_requests.topic_name, 'std_msgs/msg/String', RELIABLE_OFFERED),
             Topic(self._trajectory_pub.topic_name, 'trajectory_msgs/msg/JointTrajectory',
                   RELIABLE_OFFERED),
             Topic(self._result_pub.topic_name, 'diagnostic_msgs/msg/DiagnosticStatus',
@@ -141,7 +145,8 @@ class WaferPlannerNode(Node):
         self.create_timer(1.0, self._publish_health)
         self._worker = PlanningWorker(lambda: self.settings, self._recording,
                                       lambda *items: self._send(*items), self.get_logger(),
-                                      lambda: self.get_clock().now().to_msg())
+                                      lambda: self.get_clock().now().to_msg(),
+                                      self._stop_requests.serve, self._deliver_now)
 
     # ----------------------------------------------------------------- requests in
 
@@ -152,7 +157,7 @@ class WaferPlannerNode(Node):
         self._on_request('station', self._station_sub.topic_name, String, data, info)
 
     def _on_stop_request(self, data: bytes, info) -> None:
-        self._on_request('stop', self._stop_sub.topic_name, String, data, info)
+        self._on_request('stop', self._stop_requests.topic_name, String, data, info)
 
     def _on_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
         try:
@@ -185,7 +190,8 @@ class WaferPlannerNode(Node):
                                               'not ready: the cell is being loaded', None, None)
                     return
             if kind == 'stop':
-                self._worker.stops.enqueue(number, stop_request(msg.data), received)
+                # Answered here and now: this is the stop thread (``stop_requests``).
+                self._worker.stops.answer(number, stop_request(msg.data), received)
                 return
             request = request_of(kind, msg, cell.robot.joint_names if cell is not None else ())
         except RequestError as exc:
@@ -226,6 +232,14 @@ class WaferPlannerNode(Node):
                 self.log.error(f'query {number}: {kind.name.lower()} not published: '
                                f'{reason_of(exc)}')
 
+    def _deliver_now(self, kind: Sent, msg, number: int) -> None:
+        """Record and publish one item at once, in the calling thread (the stop thread's)."""
+        try:
+            self._deliver_one(kind, msg, number)
+        except Exception as exc:  # noqa: B902 - the next answers still go out
+            self.log.error(f'query {number}: {kind.name.lower()} not published: '
+                           f'{reason_of(exc)}')
+
     def _deliver_one(self, kind: Sent, msg, number: int) -> None:
         if kind in (Sent.ANSWER, Sent.RESULT):
             # An answer is recorded, and safe from a crash, before it goes out. The
@@ -240,7 +254,8 @@ class WaferPlannerNode(Node):
                 self.log.error(f'query {number}: answer not recorded: {reason_of(exc)}')
                 recorded = False
             if recorded is False:
-                self._late_records += 1
+                with self._outbox_lock:  # the executor's and the stop thread's
+                    self._late_records += 1
             for publisher, data in out:
                 publisher.publish(data)
                 self._live.publish(publisher, data)
@@ -358,6 +373,7 @@ class WaferPlannerNode(Node):
         self._switch.stop()
         self._live.stop()
         self._worker.join(timeout=STOP_WAIT)
+        self._stop_requests.close()
         super().destroy_node()
 
 

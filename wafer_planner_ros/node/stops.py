@@ -17,15 +17,18 @@ one answer, whatever happens. A plan request may start in motion too (``"from":
 {"trajectory": ..., "at": ...}``): ``divert`` plans it from a kept trajectory, on the
 planning thread like any plan.
 
-While a kept trajectory runs (its stamp passed, its end not yet: the latest such), a
-thread of its own makes its stops ahead of it (``service.prepared_stops``) whenever no
-stop request is waiting or answered, within the share of a core ``stops.ahead_share``
-allows (0: none), so that a request is answered from one made ahead, the move followed to
-it first (at most ``prepared_stops.EVERY`` s where making them fits the share, a stride of
-such moments where it does not).
+Stop requests come in on a node and executor of their own (``stop_requests``), which the
+stop thread spins (``serve``): a request is taken, answered, recorded and published by that
+one thread (``deliver``: the node's publishing, called from it), never behind the node's
+executor. While a kept trajectory runs (its stamp passed, its end not yet: the latest
+such), a thread of its own makes its stops ahead of it (``service.prepared_stops``)
+whenever no stop request is being answered, within the share of a core
+``stops.ahead_share`` allows (0: none), so that a request is answered from one made ahead,
+the move followed to it first (at most ``prepared_stops.EVERY`` s where making them fits
+the share, a stride of such moments where it does not).
 """
 
-from collections import deque, OrderedDict
+from collections import OrderedDict
 from dataclasses import dataclass
 import threading
 import time
@@ -37,34 +40,43 @@ from wafer_planner_ros.node.faults import reason_of
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.service.prepared_stops import EVERY, PreparedStops
 from wafer_planner_ros.service.requests import Request
+from wafer_planner_ros.service.stop_maker import StopMaker
 
 KEPT = 256
 """Published trajectories kept for stop requests (the oldest forgotten first)."""
+WAIT = 0.05
+"""s the stop thread waits for a request at a time (it ends within that once stopped)."""
 
 
 class Stops:
     """The kept trajectories, the stop-answering thread and the one making stops ahead."""
 
-    def __init__(self, send: Callable, answer_error: Callable, answer_internal: Callable,
-                 logger, clock: Callable, share: Callable[[], float]):
+    def __init__(self, serve: Callable[[float], bool], deliver: Callable,
+                 answer_error: Callable, answer_internal: Callable, logger, clock: Callable,
+                 share: Callable[[], float]):
         """
         Start the threads.
 
-        ``send(*items)`` hands messages to the executor; ``answer_error`` and
+        ``serve(timeout)`` waits up to ``timeout`` s for a stop request and takes it in the
+        calling thread, the stop thread (its callback calls ``answer``); False: no more
+        will come (``StopRequests.serve``). ``deliver(kind, message, number)`` records and
+        publishes an answer at once, in the calling thread; ``answer_error`` and
         ``answer_internal`` are the worker's (one answer per query, counted there);
         ``clock()`` is the node's time now, as the stamps are (``sec``, ``nanosec``);
         ``share()`` the share of a core making stops ahead may take now (0: none made).
         """
-        self._send, self._logger, self._clock, self._share = send, logger, clock, share
+        self._serve, self._deliver = serve, deliver
+        self._logger, self._clock, self._share = logger, clock, share
         self._answer_error, self._answer_internal = answer_error, answer_internal
         self._lock = threading.Condition()
         self._kept = OrderedDict()
         """request id -> (planner, result, roadmap) of the trajectories published."""
-        self._waiting = deque()
         self._answering = False
         self._prepared: Optional[Tuple[str, PreparedStops]] = None
         """The running trajectory's id and its stops made ahead."""
         self._stopping = False
+        self._finders = StopMaker()
+        """The process finding the stops made ahead (started at the first)."""
         self._threads = [threading.Thread(target=target, name=name, daemon=True)
                          for name, target in (('wafer_planner_stop', self._work),
                                               ('wafer_planner_stop_ahead', self._prepare))]
@@ -113,11 +125,32 @@ class Stops:
         return service.divert(result.trajectory, moving.at, request.goal, moving.trajectory,
                               deadline, request.load), later(stamp, moving.at)
 
-    def enqueue(self, number: int, request, received: float) -> None:
-        """Queue a stop request (``service.requests.StopRequest``) received at ``received``."""
+    def answer(self, number: int, request, received: float) -> None:
+        """
+        Answer stop request ``number`` in this thread: once, whatever happens.
+
+        ``request``: a ``service.requests.StopRequest``, received at ``received``
+        (``time.monotonic()``); called by ``serve``'s callback.
+        """
         with self._lock:
-            self._waiting.append((number, request, received))
-            self._lock.notify_all()
+            kept = self._kept.get(request.trajectory)
+            prepared = self._prepared
+            self._answering = True  # the stops made ahead wait
+        try:
+            ahead = None
+            try:
+                share = self._share()
+                # Made ahead of this very trajectory (an id published again names the last).
+                if prepared is not None and kept is not None and share > 0.0 and \
+                        prepared[1].trajectory is kept[1].trajectory:
+                    ahead = prepared[1].ahead_of(request.at, share)
+            except Exception as exc:  # noqa: B902 - then found for the moment itself
+                self._logger.error(f'stops made ahead not used: {reason_of(exc)}')
+            self._answer(number, request, received, kept, ahead)
+        finally:
+            with self._lock:
+                self._answering = False
+                self._lock.notify_all()
 
     def stop(self) -> None:
         """Have the threads end once idle."""
@@ -126,32 +159,18 @@ class Stops:
             self._lock.notify_all()
 
     def join(self, timeout: float) -> None:
-        """Wait up to ``timeout`` seconds for the threads."""
+        """Wait up to ``timeout`` seconds for the threads, then end the finding process."""
         end = time.monotonic() + timeout
         for thread in self._threads:
             thread.join(max(0.0, end - time.monotonic()))
+        self._finders.close()
 
     def _work(self) -> None:
-        """Answer the stop requests one at a time until stopped."""
-        while True:
-            with self._lock:
-                self._answering = False
-                self._lock.notify_all()
-                while not self._waiting and not self._stopping:
-                    self._lock.wait()
-                if self._stopping:
-                    return
-                number, request, received = self._waiting.popleft()
-                kept = self._kept.get(request.trajectory)
-                prepared = self._prepared
-                self._answering = True
-            ahead, share = None, self._share()
-            # Made ahead of this very trajectory (an id published again names the last).
-            if prepared is not None and kept is not None and share > 0.0 and \
-                    prepared[1].trajectory is kept[1].trajectory:
-                ahead = prepared[1].ahead_of(request.at, share)
+        """Take and answer the stop requests (``serve``) until stopped."""
+        while not self._stopping:
             try:
-                self._answer(number, request, received, kept, ahead)
+                if not self._serve(WAIT):
+                    return
             except Exception as exc:  # noqa: B902 - the thread outlives any one request
                 self._logger.error(f'stop thread: {reason_of(exc)}')
 
@@ -159,7 +178,7 @@ class Stops:
         """Make the running trajectory's stops ahead of it, while no request is answered."""
         while True:
             with self._lock:
-                while self._answering or self._waiting:
+                while self._answering:
                     if self._stopping:
                         return
                     self._lock.wait()
@@ -173,8 +192,8 @@ class Stops:
                     planner, result = self._kept[running[0]][:2]
                     if self._prepared is None or \
                             self._prepared[1].trajectory is not result.trajectory:
-                        self._prepared = (running[0], PreparedStops(result.trajectory,
-                                                                    planner.cell.robot))
+                        self._prepared = (running[0], PreparedStops(
+                            result.trajectory, _maker(self._finders, planner, result)))
                 prepared = self._prepared
                 index = None
                 if prepared is not None:
@@ -236,8 +255,22 @@ class Stops:
             self._answer_internal(number, request.request_id, exc, 'answering', label, 'rest',
                                   None, roadmap)
             return
-        self._send((Sent.ANSWER, answer, number))
+        self._deliver(Sent.ANSWER, answer, number)
         self.keep(request.request_id, planner, stopped, roadmap, starts)
+
+
+def _maker(finders: StopMaker, planner, result) -> Callable:
+    """
+    Return how the stops of a kept answer are made ahead: under its limit set, verified.
+
+    Found by ``finders``' process, verified here.
+    """
+    if not result.verification.proven:
+        return lambda moment: None  # none to follow its path from: each found when asked
+    planner = planner.for_load(result.load)
+    find = finders.finder(result.trajectory, planner.cell.robot)
+    return lambda moment: planner.prepare_stop(result.trajectory, moment, result.verification,
+                                               made=find(moment))
 
 
 def _seconds(stamp) -> float:

@@ -49,13 +49,15 @@ class PlanningWorker:
     """The planning, answering and watchdog threads, their queues and the loader."""
 
     def __init__(self, settings: Callable[[], NodeSettings], recording: NodeRecording,
-                 send: Callable, logger, stamp: Callable):
+                 send: Callable, logger, stamp: Callable, serve_stops: Callable,
+                 deliver: Callable):
         """
         Start the threads; the loader's first loads the roadmap.
 
         ``settings`` returns the node's current settings; ``send(*items)`` hands
         (kind, message, query number) items to the executor and never raises; ``stamp``
-        returns a ROS time.
+        returns a ROS time; ``serve_stops`` and ``deliver`` are the stop thread's way in
+        and out (``Stops``).
         """
         self._settings, self._recording, self._send = settings, recording, send
         self._logger, self._stamp = SafeLogger(logger), stamp
@@ -81,8 +83,8 @@ class PlanningWorker:
         self.last_error = ''
         self._loader = RoadmapLoader(self.lock, settings, recording, send, self._logger, stamp,
                                      self._load_failed)
-        self.stops = Stops(send, self.answer_error, self.answer_internal, self._logger, stamp,
-                           lambda: self._settings().stops_ahead_share)
+        self.stops = Stops(serve_stops, deliver, self.answer_error, self.answer_internal,
+                           self._logger, stamp, lambda: self._settings().stops_ahead_share)
         """The published trajectories and the stop requests' own thread (``stops``)."""
         self._threads = [threading.Thread(target=target, name=name, daemon=True) for name, target
                          in (('wafer_planner_worker', lambda: self._work(self._backlog)),

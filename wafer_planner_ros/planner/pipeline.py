@@ -23,7 +23,7 @@ from wafer_planner_ros.planner.endpoints import Endpoint, endpoint, only_branch
 from wafer_planner_ros.planner.legs import leg_key, Legs
 from wafer_planner_ros.planner.result import PlanResult
 from wafer_planner_ros.planner.settings import PlannerSettings
-from wafer_planner_ros.planner.stop import divert, stop
+from wafer_planner_ros.planner.stop import divert, prepare, stop
 from wafer_planner_ros.planner.through import through
 from wafer_planner_ros.trajectory.methods import CurveMethod
 
@@ -132,6 +132,19 @@ class Planner:
             return self.for_load(load).stop(trajectory, at, label, verified=verified,
                                             ahead=ahead)
         return stop(self, trajectory, at, label, verified, ahead)
+
+    def prepare_stop(self, trajectory, moment: float, verified, load: Optional[str] = None,
+                     made=None):
+        """
+        Return the stop of ``trajectory`` from ``moment`` made ahead of a request, or None.
+
+        Verified with ``verified``, the (proven) verification the move passed, under the
+        limit set ``load`` (None: this planner's); for ``stop``'s ``ahead`` (``prepare``:
+        ``made``, the stop found elsewhere, or None).
+        """
+        if load is not None and load != self.load:
+            return self.for_load(load).prepare_stop(trajectory, moment, verified, made=made)
+        return prepare(self, trajectory, moment, verified, made)
 
     def divert(self, trajectory, at: float, goal, label: str = 'the move',
                load: Optional[str] = None, deadline: Optional[float] = None,

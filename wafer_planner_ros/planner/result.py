@@ -93,9 +93,13 @@ def answer(planner, start: Endpoint, goal: Endpoint, start_q, goal_q, branches,
         timings_ms=timings_ms or {}, warnings=tuple(warnings))
 
 
-def path_lengths(cell, trajectory) -> dict:
-    """Return a trajectory's ``joint_path_length`` (rad) and ``wafer_path_length`` (m)."""
-    dense = trajectory.evaluate(np.linspace(0.0, trajectory.duration, LENGTH_SAMPLES))
+def path_lengths(cell, trajectory, samples: int = LENGTH_SAMPLES) -> dict:
+    """
+    Return a trajectory's ``joint_path_length`` (rad) and ``wafer_path_length`` (m).
+
+    Summed over ``samples`` points evenly spaced in time.
+    """
+    dense = trajectory.evaluate(np.linspace(0.0, trajectory.duration, samples))
     wafer = cell.robot.arm.wafer_center(dense)
     return {'joint_path_length': float(np.linalg.norm(np.diff(dense, axis=0), axis=1).sum()),
             'wafer_path_length': float(np.linalg.norm(np.diff(wafer, axis=0), axis=1).sum())}

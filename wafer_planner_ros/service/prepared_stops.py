@@ -9,8 +9,10 @@ order the move reaches them, from where it is (``wanted``), ``AHEAD`` s ahead at
 A request to stop at ``at`` then takes the stop of the first moment made at or after
 ``at`` within a stride (``ahead_of``): the answer follows the move from ``at`` to that
 moment and brakes from there as that stop does (``Planner.stop``'s ``ahead``; the rest of
-the move where that is sooner), verified as every stop is. A moment not yet made is found
-for ``at`` itself, as without this.
+the move where that is sooner). Each stop is verified as it is made
+(``planner.stop.prepare``), so a request checks only the stretch of the move it follows
+and the join (``verify.verify_joined``). A moment not yet made is found for ``at``
+itself, as without this.
 
 Making them costs a core's time in proportion to how long a stop takes to make (its mean
 so far) over the time between two moments made: where stops take long (a move through
@@ -21,17 +23,17 @@ once, as fast as a core allows); a request is then followed at most a stride of 
 before it brakes.
 
 The stops are made with the move's own limit set and kept only while they are ahead of
-the move (``forget_before``); nothing here is published: each is a draft of an answer,
-verified when it is one.
+the move (``forget_before``); nothing here is published: each is a part of an answer,
+whose whole is checked as it is made one.
 """
 
 import math
 import threading
 import time
-from typing import Dict, Optional
+from typing import Callable, Dict, Optional
 
 from wafer_planner_ros.errors import PlanningError
-from wafer_planner_ros.trajectory.stopping import controlled_stop, Stop
+from wafer_planner_ros.planner.stop import Prepared
 
 EVERY = 0.02
 """s of a move between the moments whose stops may be made ahead."""
@@ -44,11 +46,16 @@ SHARE = 0.5
 class PreparedStops:
     """The stops of one move made ahead (the module's description); safe across threads."""
 
-    def __init__(self, trajectory, robot):
-        """Make the stops of ``trajectory`` (a published move) under ``robot``'s limit set."""
-        self.trajectory, self.robot = trajectory, robot
+    def __init__(self, trajectory, make: Callable[[float], Optional[Prepared]]):
+        """
+        Make the stops of ``trajectory`` (a published move) with ``make(moment)``.
+
+        ``make``: the stop from ``moment`` s of the move, verified (``planner.stop.prepare``
+        under the move's limit set, with its verification), None where none is made.
+        """
+        self.trajectory, self._make = trajectory, make
         self._lock = threading.Lock()
-        self._made: Dict[int, Optional[Stop]] = {}
+        self._made: Dict[int, Optional[Prepared]] = {}
         """moment index -> its stop (None: none there, e.g. the move rests)."""
         self._making = [0, 0.0]
         """Stops made, the seconds that took."""
@@ -97,10 +104,10 @@ class PreparedStops:
         return None
 
     def make(self, index: int) -> None:
-        """Make the stop from moment ``index`` (``controlled_stop``) and hold it."""
+        """Make the stop from moment ``index`` (``make``) and hold it."""
         begun = time.perf_counter()
         try:
-            stop = controlled_stop(self.trajectory, index * EVERY, self.robot)
+            stop = self._make(index * EVERY)
         except PlanningError:
             stop = None  # at rest there: a request there is refused as it would be anyway
         with self._lock:
@@ -108,7 +115,7 @@ class PreparedStops:
             self._making[0] += 1
             self._making[1] += time.perf_counter() - begun
 
-    def ahead_of(self, at: float, share: float = SHARE) -> Optional[Stop]:
+    def ahead_of(self, at: float, share: float = SHARE) -> Optional[Prepared]:
         """
         Return the stop made from the first moment at or after ``at``; None: not made.
 

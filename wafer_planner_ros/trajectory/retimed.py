@@ -45,9 +45,15 @@ class Retimed(Trajectory):
 
     kind: ClassVar[str] = 'retimed'
 
-    def __init__(self, base: Trajectory, timing: JerkProfile):
-        """Keep the base curve and the timing of its time sigma."""
-        self.base, self.timing = base, timing
+    def __init__(self, base: Trajectory, timing: JerkProfile,
+                 breaks: Optional[np.ndarray] = None):
+        """
+        Keep the base curve and the timing of its time sigma.
+
+        ``breaks``: what ``breaks`` returns, where the caller has it from a curve this one
+        is made of (``stopping.followed``); found at the first call otherwise, then kept.
+        """
+        self.base, self.timing, self._breaks = base, timing, breaks
 
     @property
     def duration(self) -> float:
@@ -70,6 +76,12 @@ class Retimed(Trajectory):
         (``JerkProfile.turns``), which is what ``peak_speed`` needs: a stop's timing of
         hundreds of short phases is a few pieces to prove.
         """
+        if self._breaks is None:
+            self._breaks = self._found_breaks()
+        return self._breaks
+
+    def _found_breaks(self) -> np.ndarray:
+        """Return ``breaks`` from the base's and the timing (crossings by halving)."""
         timing = self.timing
         states, starts = timing.states, timing.starts
         base = self.base.breaks()
@@ -119,6 +131,15 @@ class Retimed(Trajectory):
         problem = self.base.ill_formed(ends[0], ends[1])
         if problem is not None:
             return f'its base: {problem}'
+        return self.timing_problem() or self.ends_problem(start, goal)
+
+    def timing_problem(self) -> Optional[str]:
+        """
+        Return what makes the timing no motion along the base to rest, or None.
+
+        ``ill_formed`` without the base's own form and the ends: for a base whose form
+        was checked when it was verified (``verify.verify_joined``).
+        """
         timing = self.timing
         problem = timing.structure_problem()
         if problem is not None:
@@ -133,7 +154,7 @@ class Retimed(Trajectory):
                 (timing.end_speed == 0.0 and timing.end_acceleration == 0.0)):
             return (f'it does not end at rest (speed {timing.end_speed:.3g}, acceleration '
                     f'{timing.end_acceleration:.3g})')
-        return self.ends_problem(start, goal)
+        return None
 
     def describe(self) -> dict:
         """Return the base and the timing as plain data."""

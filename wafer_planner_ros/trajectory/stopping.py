@@ -141,14 +141,26 @@ def followed(ahead: Stop, trajectory: Trajectory, at: float) -> Stop:
     if ahead.timing == 'rest' or coast + timing.duration >= rest:
         return rest_of(trajectory, at)
     phases = _coasted((timing.starts, timing.jerks, timing.states), at, coast)
-    return Stop(Retimed(trajectory, JerkProfile(*phases)), ahead.share, ahead.timing)
+    # Its breaks: where the move's own are crossed while it is followed (sigma = t), the
+    # join (sigma'' = 0 there), then the stop's, later by ``coast``.
+    breaks = np.unique(np.concatenate([[0.0, coast], _crossed(trajectory, at, moment),
+                                       ahead.trajectory.breaks() + coast]))
+    return Stop(Retimed(trajectory, JerkProfile(*phases), breaks), ahead.share, ahead.timing)
 
 
 def rest_of(trajectory: Trajectory, at: float) -> Stop:
     """Return the rest of ``trajectory`` from ``at`` as a stop (sigma = t): it ends at rest."""
     rest = trajectory.duration - at
+    breaks = np.unique(np.concatenate([[0.0, rest],
+                                       _crossed(trajectory, at, trajectory.duration)]))
     return Stop(Retimed(trajectory, JerkProfile(np.array([0.0, rest]), np.zeros(1), np.array(
-        [[at, 1.0, 0.0], [trajectory.duration, 1.0, 0.0]]))), None, 'rest')
+        [[at, 1.0, 0.0], [trajectory.duration, 1.0, 0.0]])), breaks), None, 'rest')
+
+
+def _crossed(trajectory: Trajectory, at: float, until: float) -> np.ndarray:
+    """Return when a curve followed as it is (sigma = t) from ``at`` is at its breaks < until."""
+    base = trajectory.breaks()
+    return base[(base > at) & (base < until)] - at
 
 
 def _braked(trajectory, at, robot, acceleration, jerk, wafer) -> Optional[Stop]:

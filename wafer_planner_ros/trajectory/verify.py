@@ -98,31 +98,10 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray,
     if problem is not None:
         return Verification(problems=(f'ill-formed curve: {problem}',))
     robot = cell.robot
-    constraints = limit_constraints(robot.limit_set)
     states = limit_states(trajectory, robot)
-    t, q, qd, qdd, qddd = states.t, *states.derivatives
-    ratios = state_ratios(constraints, states)
-    # Written so that NaN fails: every comparison with NaN is false.
-    problems = [f'{name} reaches {ratio:.4f} x its limit'
-                for name, ratio in ratios.items() if not ratio <= 1.0]
-    for name, values in (('position', q), ('velocity', qd), ('acceleration', qdd),
-                         ('jerk', qddd)):
-        if not np.isfinite(values).all():
-            problems.append(f'the {name} is not finite everywhere')
-    outside = position_bound(constraints).outside(q)
-    problems += [f'joint {robot.joint_names[j]} leaves its position limits' for j in outside]
-    if not np.array_equal(q[0], start) or not np.array_equal(q[-1], goal):
-        problems.append('the trajectory does not start and end exactly at start and goal')
-    ends = np.abs(np.concatenate([qd[[-1]], qdd[[-1]]])).max()
-    if not ends <= END_TOLERANCE:
-        problems.append(f'velocity or acceleration at the end is {ends:.3g}, not zero')
-    begins = np.zeros((2, len(start))) if moving is None else np.asarray(moving, float)
-    gap = np.abs(np.stack([qd[0], qdd[0]]) - begins).max()
-    if not gap <= END_TOLERANCE:
-        problems.append(f'velocity or acceleration at the start is {gap:.3g} from '
-                        + ('zero' if moving is None else 'the motion it continues'))
-    peak_jerk = tuple(np.abs(qddd).max(axis=0).tolist())
-    peak_wafer_jerk = float(np.hypot(*robot.arm.wafer_jerk(q, qd, qdd, qddd).T).max())
+    t, q, qd, qdd = states.t, *states.derivatives[:3]
+    problems, ratios, peak_jerk, peak_wafer_jerk = _limit_problems(states, robot)
+    problems += _end_problems(start, goal, moving, q[[0, -1]], qd[[0, -1]], qdd[[0, -1]])
     if base is not None:
         return Verification(problems=tuple(problems), ratios=ratios,
                             min_clearance=base.min_clearance, peak_jerk=peak_jerk,
@@ -151,6 +130,96 @@ def verify(trajectory: Trajectory, cell, start: np.ndarray, goal: np.ndarray,
                         peak_jerk=peak_jerk, peak_wafer_jerk=peak_wafer_jerk,
                         port_ratios=port_ratios, limit_samples=len(t),
                         collision_samples=checks, proof=proof)
+
+
+def verify_joined(trajectory: Retimed, cell, start: np.ndarray, goal: np.ndarray,
+                  moving: Tuple[np.ndarray, np.ndarray], base: 'Verification', coast: float,
+                  then: Tuple[Trajectory, 'Verification']) -> Verification:
+    """
+    Check a curve that follows its base for ``coast`` s, then goes on as a verified stop does.
+
+    ``trajectory``: a ``Retimed`` of a curve that passed ``base`` (as ``verify``'s),
+    sigma = t for its first ``coast`` s; from there exactly the curve of ``then``, a stop
+    of the same base from the state reached, which passed its own verification (with
+    ``base``) when it was made. So that part is not checked again. This checks the whole
+    curve's timing (``Retimed.timing_problem``: sigma never moving back, on the base's
+    time, at rest at the end; the base's own form was checked when it passed ``base``)
+    and its ends as ``verify`` does, its limits over [0, ``coast``] every ``LIMIT_STEP``
+    from 0, and that it joins ``then``'s curve in position, velocity and acceleration
+    and ends where that does (to ``END_TOLERANCE``); its figures are the larger of the
+    two parts'.
+    """
+    if not (isinstance(trajectory, Retimed) and base.proven and then[1].ok and
+            then[1].on_base):
+        raise ValueError('a joined verification needs a curve retimed along a verified path '
+                         'and a verified stop made along it')
+    # The base's form was checked when it passed ``base``; the ends are checked below.
+    problem = trajectory.timing_problem()
+    if problem is not None:
+        return Verification(problems=(f'ill-formed curve: {problem}',))
+    robot, (curve, rest) = cell.robot, then
+    t = limit_times(coast)
+    # The limit check's times, then the join and the end: one evaluation.
+    every = trajectory.evaluate_orders(np.append(t, [coast, trajectory.duration]), range(4))
+    q, qd, qdd, qddd = (x[:-2] for x in every)
+    states = States(t, q, qd, qdd, qddd, robot.arm.wafer_acceleration(q, qd, qdd))
+    problems, ratios, peak_jerk, peak_wafer_jerk = _limit_problems(states, robot)
+    problems += _end_problems(start, goal, moving, *(x[[0, -1]] for x in every[:3]))
+    its = np.stack(curve.evaluate_orders([0.0, curve.duration], range(3)))
+    gap = np.abs(np.stack(every[:3])[:, -2] - its[:, 0]).max()
+    if not gap <= END_TOLERANCE:
+        problems.append(f'it leaves its base {gap:.3g} from the verified stop it joins')
+    gap = np.abs(every[0][-1] - its[0, 1]).max()
+    if not gap <= END_TOLERANCE:
+        problems.append(f'it ends {gap:.3g} from where the verified stop it joins ends')
+    return Verification(
+        problems=tuple(problems),
+        ratios={name: max(ratio, rest.ratios.get(name, 0.0)) for name, ratio in ratios.items()},
+        min_clearance=base.min_clearance,
+        peak_jerk=tuple(np.maximum(peak_jerk, rest.peak_jerk).tolist()),
+        peak_wafer_jerk=max(peak_wafer_jerk, rest.peak_wafer_jerk),
+        port_ratios=base.port_ratios, limit_samples=len(t) + rest.limit_samples,
+        proof=base.proof, on_base=True)
+
+
+def _limit_problems(states: States, robot) -> tuple:
+    """Return (problems, ratios, peak jerk per joint, peak wafer jerk) of limit states."""
+    constraints = limit_constraints(robot.limit_set)
+    q, qd, qdd, qddd = states.derivatives
+    ratios = state_ratios(constraints, states)
+    # Written so that NaN fails: every comparison with NaN is false.
+    problems = [f'{name} reaches {ratio:.4f} x its limit'
+                for name, ratio in ratios.items() if not ratio <= 1.0]
+    for name, values in (('position', q), ('velocity', qd), ('acceleration', qdd),
+                         ('jerk', qddd)):
+        if not np.isfinite(values).all():
+            problems.append(f'the {name} is not finite everywhere')
+    outside = position_bound(constraints).outside(q)
+    problems += [f'joint {robot.joint_names[j]} leaves its position limits' for j in outside]
+    peak_jerk = tuple(np.abs(qddd).max(axis=0).tolist())
+    peak_wafer_jerk = float(np.hypot(*robot.arm.wafer_jerk(q, qd, qdd, qddd).T).max())
+    return problems, ratios, peak_jerk, peak_wafer_jerk
+
+
+def _end_problems(start, goal, moving, q, qd, qdd) -> list:
+    """
+    Return what is wrong with a curve's ends: ``q``, ``qd``, ``qdd`` at its start and end.
+
+    Exactly at ``start`` and ``goal``, at rest at the end, starting at rest or, for a curve
+    continuing a motion, in ``moving`` (velocity, acceleration).
+    """
+    problems = []
+    if not np.array_equal(q[0], start) or not np.array_equal(q[-1], goal):
+        problems.append('the trajectory does not start and end exactly at start and goal')
+    ends = np.abs(np.concatenate([qd[[-1]], qdd[[-1]]])).max()
+    if not ends <= END_TOLERANCE:
+        problems.append(f'velocity or acceleration at the end is {ends:.3g}, not zero')
+    begins = np.zeros((2, len(start))) if moving is None else np.asarray(moving, float)
+    gap = np.abs(np.stack([qd[0], qdd[0]]) - begins).max()
+    if not gap <= END_TOLERANCE:
+        problems.append(f'velocity or acceleration at the start is {gap:.3g} from '
+                        + ('zero' if moving is None else 'the motion it continues'))
+    return problems
 
 
 def port_deviation(model, q: np.ndarray) -> tuple:
