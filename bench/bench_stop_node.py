@@ -30,11 +30,11 @@ than ``at``: counted as made ahead) and finds the stop for the moment itself oth
 End to end: from just before the peer publishes the stop request (``~/stop_request``) to
 the later of the peer's receipt of its ``~/result`` and of its trajectory (``~/trajectory``,
 frame_id = the stop's id), both taken in the subscription callbacks (raw: before any
-deserialising). Also per stop the result's ``node_ms`` (node receipt to the answer handed
-to the executor), ``stop_ms`` and ``verify_ms``, and where the rest goes, on the wall clock
+deserialising). Also per stop the result's ``node_ms`` (from the stop thread's callback to
+the answer made), ``stop_ms`` and ``verify_ms``, and where the rest goes, on the wall clock
 every process shares: the peer's publish, the node's DDS receipt of the request (its
-recording's log time), the moment the node's executor recorded the answer (its log time),
-the result's DDS source time stamp (published), the peer's DDS receipt and its callback.
+recording's log time), the result's DDS source time stamp (published: the node publishes
+a stop, then records it), the peer's DDS receipt and its callback.
 
 Whether a stop was the rest of the move (``'rest'``) is not among the result's values
 (``messages.plan_values`` leaves out the stop's ``timing``); it is told apart here by its
@@ -381,16 +381,18 @@ def _recorded_times(directory: str) -> dict:
 def _breakdown(row: dict, recorded: dict) -> None:
     """Add where the end-to-end time went (ms) to a row, from the wall-clock stamps."""
     got = recorded.get(row['id'], {})
-    if 'node_received_ns' not in got or 'recorded_ns' not in got or row['node_ms'] is None:
+    if 'node_received_ns' not in got or row['node_ms'] is None:
         return
     ms = 1e-6
-    inside = (got['recorded_ns'] - got['node_received_ns']) * ms
+    # The node publishes a stop first, then records it: from its receipt to its result's
+    # publication, the stop thread's time less what ``node_ms`` covers (from the callback's
+    # start to the answer made) is its wake-up and the answer's messages and publishing.
+    inside = (row['result_source_ns'] - got['node_received_ns']) * ms
     row['split_ms'] = {
         'inbound_dds': (got['node_received_ns'] - row['sent_ns']) * ms,
-        'executor_in_out': inside - row['node_ms'],
+        'wake_and_publish': inside - row['node_ms'],
         'stop': row['stop_ms'], 'verify': row['verify_ms'],
-        'answer_and_thread': row['node_ms'] - row['stop_ms'] - row['verify_ms'],
-        'record_and_publish': (row['result_source_ns'] - got['recorded_ns']) * ms,
+        'request_and_answer': row['node_ms'] - row['stop_ms'] - row['verify_ms'],
         'outbound_dds': (row['result_received_ns'] - row['result_source_ns']) * ms,
         'peer_callback': (row['result_callback_ns'] - row['result_received_ns']) * ms,
     }

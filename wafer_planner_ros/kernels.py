@@ -36,6 +36,7 @@ import threading
 import types
 from typing import Callable, List, Optional
 
+from wafer_planner_ros import giving_way
 from wafer_planner_ros.kernels_keys import argument_types
 
 _LOCK = threading.RLock()
@@ -79,8 +80,11 @@ class Kernel:
         """
         Call the compiled kernel: built ahead of time for these argument types, or numba's.
 
-        Numba is imported and the kernel made the first time a call needs it.
+        Numba is imported and the kernel made the first time a call needs it. First it
+        gives way to an urgent answer being made in another thread (``giving_way``).
         """
+        if giving_way.urgent_now():
+            giving_way.give_way()
         ahead = self._ahead
         if ahead is not None:
             if len(args) < self._arity:  # built with every argument: the defaults added

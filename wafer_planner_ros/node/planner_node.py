@@ -47,6 +47,7 @@ except ImportError:
     TFMessage = None
 
 from wafer_planner_ros.errors import ErrorCode
+from wafer_planner_ros.giving_way import urgent
 from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.health import diagnostics
@@ -157,7 +158,9 @@ class WaferPlannerNode(Node):
         self._on_request('station', self._station_sub.topic_name, String, data, info)
 
     def _on_stop_request(self, data: bytes, info) -> None:
-        self._on_request('stop', self._stop_requests.topic_name, String, data, info)
+        # The stop thread's: planning and the rest pause while it answers (``giving_way``).
+        with urgent():
+            self._on_request('stop', self._stop_requests.topic_name, String, data, info)
 
     def _on_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
         try:
@@ -233,38 +236,54 @@ class WaferPlannerNode(Node):
                                f'{reason_of(exc)}')
 
     def _deliver_now(self, kind: Sent, msg, number: int) -> None:
-        """Record and publish one item at once, in the calling thread (the stop thread's)."""
+        """
+        Publish one answer at once, in the calling thread (the stop thread's), then record it.
+
+        A stop must not wait for a disk: unlike the worker's answers, it goes out first and
+        is recorded right after (a crash in between loses that one record).
+        """
         try:
-            self._deliver_one(kind, msg, number)
+            self._deliver_one(kind, msg, number, recorded_first=False)
         except Exception as exc:  # noqa: B902 - the next answers still go out
             self.log.error(f'query {number}: {kind.name.lower()} not published: '
                            f'{reason_of(exc)}')
 
-    def _deliver_one(self, kind: Sent, msg, number: int) -> None:
+    def _deliver_one(self, kind: Sent, msg, number: int, recorded_first: bool = True) -> None:
         if kind in (Sent.ANSWER, Sent.RESULT):
-            # An answer is recorded, and safe from a crash, before it goes out. The
-            # trajectory before its result: a client holding the result can rely on the
-            # trajectory having been sent.
+            # An answer is recorded, and safe from a crash, before it goes out (a stop's
+            # right after: ``_deliver_now``). The trajectory before its result: a client
+            # holding the result can rely on the trajectory having been sent.
             out = ((self._trajectory_pub, msg[0]), (self._result_pub, msg[1])) \
                 if kind is Sent.ANSWER else ((self._result_pub, msg),)
-            try:
-                recorded = self._recording.answer(number, [(p.topic_name, data)
-                                                           for p, data in out])
-            except Exception as exc:  # noqa: B902 - the answer goes out all the same
-                self.log.error(f'query {number}: answer not recorded: {reason_of(exc)}')
-                recorded = False
-            if recorded is False:
-                with self._outbox_lock:  # the executor's and the stop thread's
-                    self._late_records += 1
+            if recorded_first:
+                self._record_answer(number, out)
             for publisher, data in out:
                 publisher.publish(data)
                 self._live.publish(publisher, data)
+            if not recorded_first:
+                self._record_answer(number, out, counted=False)
         else:
             publisher = self._roadmap_pub if kind is Sent.MARKERS else self._path_pub
             publisher.publish(msg)
             self._live.publish(publisher, msg)
             if kind is Sent.MARKERS:
                 self._place_joint_space()
+
+    def _record_answer(self, number: int, out, counted: bool = True) -> None:
+        """
+        Record query ``number`` with its answer ``out`` ((publisher, bytes) pairs).
+
+        ``counted``: one recorded after it went out is counted in ``answers_before_recorded``
+        (a stalled disk); False for a stop's, recorded after it by design.
+        """
+        try:
+            recorded = self._recording.answer(number, [(p.topic_name, data) for p, data in out])
+        except Exception as exc:  # noqa: B902 - the answer goes out all the same
+            self.log.error(f'query {number}: answer not recorded: {reason_of(exc)}')
+            recorded = False
+        if recorded is False and counted:
+            with self._outbox_lock:  # the executor's and the stop thread's
+                self._late_records += 1
 
     def _place_joint_space(self) -> None:
         """Publish where the joint-space markers' frame stands beside the cell (static)."""

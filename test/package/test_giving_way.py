@@ -1,0 +1,58 @@
+"""Giving way: other threads pause at their kernel calls while one makes an urgent answer."""
+
+import threading
+import time
+
+from wafer_planner_ros import giving_way
+from wafer_planner_ros.geometry.predicates import orient
+from wafer_planner_ros.giving_way import give_way, urgent
+
+
+def _turn() -> int:
+    """Call a compiled kernel (the left turn of three points: 1)."""
+    return orient(0.0, 0.0, 1.0, 0.0, 0.0, 1.0, True)
+
+
+def _urgent_while(then, order, entered, calls=()):
+    """Run ``calls`` inside ``urgent()`` in a thread; append 'answered' when it leaves."""
+    def answer():
+        with urgent():
+            entered.set()
+            for call in calls:
+                call()
+            time.sleep(0.2)  # the other thread reaches its kernel call meanwhile
+            order.append('answered')
+        then()
+    thread = threading.Thread(target=answer)
+    thread.start()
+    return thread
+
+
+def test_another_thread_s_kernel_call_waits_until_the_urgent_answer_is_made(monkeypatch):
+    monkeypatch.setattr(giving_way, 'LONGEST', 10.0)
+    order, entered = [], threading.Event()
+    # The urgent thread's own kernel calls and give_way do not wait for it.
+    thread = _urgent_while(lambda: None, order, entered, calls=(give_way, _turn))
+    entered.wait()
+    assert _turn() == 1  # a kernel: it gives way first
+    order.append('went on')
+    thread.join(timeout=5.0)
+    assert not thread.is_alive()
+    assert order == ['answered', 'went on']
+    assert not giving_way.urgent_now()
+
+
+def test_a_pause_is_bounded_so_a_lock_held_by_a_paused_thread_never_blocks_for_good(
+        monkeypatch):
+    monkeypatch.setattr(giving_way, 'LONGEST', 0.01)
+    held = threading.Lock()
+    order, entered, release = [], threading.Event(), threading.Event()
+    with held:
+        # The urgent thread needs the lock this (paused) thread holds: it gets it once
+        # the pause has run out and this thread lets it go.
+        thread = _urgent_while(release.set, order, entered, calls=(held.acquire, held.release))
+        entered.wait()
+        give_way()
+        order.append('paused, went on')
+    thread.join(timeout=5.0)
+    assert release.is_set() and order == ['paused, went on', 'answered']
