@@ -10,31 +10,53 @@ needs, held by a paused thread, delays it that long at most, never for good. Eve
 compiled kernel's call gives way (``kernels.Kernel``): planning, the roadmap's build and
 the verification of stops made ahead call kernels every few microseconds to
 milliseconds. Nothing else changes: a paused computation goes on where it was.
+
+The operating system is asked the same (``background``): the threads whose work nobody
+waits for from one moment to the next (planning, the roadmap's load) run at a lower
+scheduling priority, so that on a busy machine an urgent thread waking up gets a core.
 """
 
 from contextlib import contextmanager
+import gc
+import os
 import threading
 
 LONGEST = 0.02
 """s one ``give_way`` pauses at most."""
+BACKGROUND = 5
+"""How much lower a ``background`` thread's scheduling priority is (Linux nice levels)."""
 
-_urgent = set()
-"""The threads (idents) making an urgent answer now."""
+_urgent = {}
+"""The threads (idents) making an urgent answer now: how many ``urgent`` contexts deep."""
 _changed = threading.Condition()
+_collecting = [True]
+"""Whether the garbage collector was on when urgent work began."""
 
 
 @contextmanager
 def urgent():
-    """Make the calling thread's work urgent while in the context: the others give way."""
+    """
+    Make the calling thread's work urgent while in the context (nested: the outermost).
+
+    The cyclic garbage collector waits too: it is off while any work is urgent (unless it
+    was off before), so that no collection starts in the middle of it.
+    """
     ident = threading.get_ident()
     with _changed:
-        _urgent.add(ident)
+        if not _urgent:
+            _collecting[0] = gc.isenabled()
+            gc.disable()
+        _urgent[ident] = _urgent.get(ident, 0) + 1
     try:
         yield
     finally:
         with _changed:
-            _urgent.discard(ident)
-            _changed.notify_all()
+            _urgent[ident] -= 1
+            if not _urgent[ident]:
+                del _urgent[ident]
+                if not _urgent and _collecting[0]:
+                    gc.enable()
+                _changed.notify_all()
 
 
 def urgent_now() -> bool:
@@ -48,3 +70,13 @@ def give_way() -> None:
         return
     with _changed:
         _changed.wait_for(lambda: not _urgent or threading.get_ident() in _urgent, LONGEST)
+
+
+def background() -> None:
+    """Lower the calling thread's scheduling priority by ``BACKGROUND`` (where the OS can)."""
+    try:
+        native = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, native,
+                       os.getpriority(os.PRIO_PROCESS, native) + BACKGROUND)
+    except (AttributeError, OSError):
+        pass  # not Linux, or not allowed: the same work, at the same priority

@@ -1,5 +1,7 @@
 """Giving way: other threads pause at their kernel calls while one makes an urgent answer."""
 
+import gc
+import os
 import threading
 import time
 
@@ -56,3 +58,37 @@ def test_a_pause_is_bounded_so_a_lock_held_by_a_paused_thread_never_blocks_for_g
         order.append('paused, went on')
     thread.join(timeout=5.0)
     assert release.is_set() and order == ['paused, went on', 'answered']
+
+
+def test_a_background_thread_runs_at_a_lower_scheduling_priority():
+    seen = {}
+
+    def work():
+        native = threading.get_native_id()
+        before = os.getpriority(os.PRIO_PROCESS, native)
+        giving_way.background()
+        seen['change'] = os.getpriority(os.PRIO_PROCESS, native) - before
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    thread.join()
+    # Lowered (up to the lowest priority there is), and only that thread's.
+    assert seen['change'] == min(giving_way.BACKGROUND, 19 - os.getpriority(os.PRIO_PROCESS, 0))
+    assert seen['change'] > 0 or os.getpriority(os.PRIO_PROCESS, 0) == 19
+
+
+def test_urgency_lasts_until_the_outermost_urgent_context_ends():
+    assert gc.isenabled()
+    with urgent():
+        with urgent():
+            assert giving_way.urgent_now() and not gc.isenabled()
+        assert giving_way.urgent_now() and not gc.isenabled()  # the inner one ending does not
+    assert not giving_way.urgent_now() and gc.isenabled()
+    # The collector stays off after urgent work where it was off before.
+    gc.disable()
+    try:
+        with urgent():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

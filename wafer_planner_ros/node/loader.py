@@ -25,6 +25,7 @@ import threading
 import time
 from typing import Callable, Optional
 
+from wafer_planner_ros import giving_way
 from wafer_planner_ros.cell.document import read_cell_file
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import WaferPlannerError
@@ -132,6 +133,7 @@ class RoadmapLoader:
 
     def _load(self) -> None:
         """Load or build the roadmap for the current parameters, again if asked; never raise."""
+        giving_way.background()
         while True:
             try:
                 self._load_roadmap()

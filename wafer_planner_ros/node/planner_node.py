@@ -47,7 +47,6 @@ except ImportError:
     TFMessage = None
 
 from wafer_planner_ros.errors import ErrorCode
-from wafer_planner_ros.giving_way import urgent
 from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import guarded_service, reason_of, SafeLogger
 from wafer_planner_ros.node.health import diagnostics
@@ -158,9 +157,8 @@ class WaferPlannerNode(Node):
         self._on_request('station', self._station_sub.topic_name, String, data, info)
 
     def _on_stop_request(self, data: bytes, info) -> None:
-        # The stop thread's: planning and the rest pause while it answers (``giving_way``).
-        with urgent():
-            self._on_request('stop', self._stop_requests.topic_name, String, data, info)
+        # The stop thread's (``stop_requests``): the other threads give way meanwhile.
+        self._on_request('stop', self._stop_requests.topic_name, String, data, info)
 
     def _on_request(self, kind: str, topic: str, message_type, data: bytes, info) -> None:
         try:

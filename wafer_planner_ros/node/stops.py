@@ -34,6 +34,7 @@ import threading
 import time
 from typing import Callable, Optional, Tuple
 
+from wafer_planner_ros import giving_way
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.node import messages
 from wafer_planner_ros.node.faults import reason_of
@@ -176,6 +177,7 @@ class Stops:
 
     def _prepare(self) -> None:
         """Make the running trajectory's stops ahead of it, while no request is answered."""
+        giving_way.background()
         while True:
             with self._lock:
                 while self._answering:

@@ -1,0 +1,57 @@
+"""Stops found in a child process: the very stops found in process, put on the caller's move."""
+
+import numpy as np
+import pytest
+
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.planner import Planner
+from wafer_planner_ros.service.stop_maker import StopMaker
+from wafer_planner_ros.trajectory.stopping import controlled_stop
+
+
+@pytest.fixture(scope='module')
+def planner(default_cell, default_roadmap):
+    return Planner(default_cell, default_roadmap)
+
+
+@pytest.fixture(scope='module')
+def planned(planner):
+    return planner.plan('loadport1', 'loadlock2')
+
+
+@pytest.fixture
+def maker():
+    made = StopMaker()
+    yield made
+    made.close()
+
+
+def test_a_stop_found_by_the_child_is_the_one_found_in_process_on_the_caller_s_move(
+        maker, planner, planned, default_cell):
+    move = planned.trajectory
+    find = maker.finder(move, default_cell.robot)
+    for moment in (0.1 * move.duration, 0.4 * move.duration, 0.8 * move.duration):
+        found, here = find(moment), controlled_stop(move, moment, default_cell.robot)
+        assert found.trajectory.base is move  # the caller's own curve, not a copy
+        assert found.timing == here.timing and found.share == here.share
+        assert np.array_equal(found.trajectory.timing.states, here.trajectory.timing.states)
+        assert np.array_equal(found.trajectory.breaks(), here.trajectory.breaks())
+        # A draft only: verified by the caller as any stop.
+        prepared = planner.prepare_stop(move, moment, planned.verification, made=found)
+        assert prepared is not None and prepared.verification.ok
+    with pytest.raises(PlanningError) as raised:
+        find(move.duration + 1.0)
+    assert raised.value.code is ErrorCode.OUTSIDE_TRAJECTORY
+    assert maker.started == 1
+
+
+def test_a_child_that_ends_fails_one_stop_and_the_next_starts_another(maker, planned,
+                                                                      default_cell):
+    move = planned.trajectory
+    find = maker.finder(move, default_cell.robot)
+    find(0.5)
+    maker._process.kill()
+    with pytest.raises(RuntimeError, match='the stop maker ended'):
+        find(0.6)
+    assert find(0.6).trajectory.base is move  # the move handed to the new child again
+    assert maker.started == 2
