@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from wafer_planner_ros.cell.model import Cell, default_cell_path
+from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import load_or_build
 
 CELL_DIR = Path(__file__).resolve().parent / 'support' / 'cells'
@@ -62,6 +63,18 @@ def roadmap(cell, roadmap_cache):
 def default_roadmap(default_cell, roadmap_cache):
     """Return the default-settings roadmap of the default cell."""
     return load_or_build(default_cell, cache_dir=roadmap_cache).roadmap
+
+
+@pytest.fixture(scope='session')
+def default_planner(default_cell, default_roadmap):
+    """Return the default cell's planner (its default limit set: loaded)."""
+    return Planner(default_cell, default_roadmap)
+
+
+@pytest.fixture(scope='session')
+def station_move(default_planner):
+    """Return the loaded move loadport1 -> loadlock2 of the default cell, verified."""
+    return default_planner.plan('loadport1', 'loadlock2')
 
 
 @pytest.fixture(scope='module')

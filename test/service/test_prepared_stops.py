@@ -3,29 +3,19 @@
 import numpy as np
 import pytest
 
-from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.service.prepared_stops import AHEAD, EVERY, PreparedStops
 from wafer_planner_ros.trajectory.stopping import controlled_stop
 
 
 @pytest.fixture(scope='module')
-def planner(default_cell, default_roadmap):
-    return Planner(default_cell, default_roadmap)
-
-
-@pytest.fixture(scope='module')
-def planned(planner):
-    return planner.plan('loadport1', 'loadlock2')
-
-
-@pytest.fixture(scope='module')
-def move(planned):
-    return planned.trajectory
+def move(station_move):
+    return station_move.trajectory
 
 
 @pytest.fixture
-def maker(planner, planned):
-    return lambda moment: planner.prepare_stop(planned.trajectory, moment, planned.verification)
+def maker(default_planner, station_move):
+    return lambda moment: default_planner.prepare_stop(station_move.trajectory, moment,
+                                                       station_move.verification)
 
 
 def test_the_moments_ahead_of_the_move_are_made_in_order_and_forgotten_once_passed(

@@ -4,19 +4,8 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.errors import ErrorCode, PlanningError
-from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.service.stop_maker import StopMaker
 from wafer_planner_ros.trajectory.stopping import controlled_stop
-
-
-@pytest.fixture(scope='module')
-def planner(default_cell, default_roadmap):
-    return Planner(default_cell, default_roadmap)
-
-
-@pytest.fixture(scope='module')
-def planned(planner):
-    return planner.plan('loadport1', 'loadlock2')
 
 
 @pytest.fixture
@@ -27,8 +16,8 @@ def maker():
 
 
 def test_a_stop_found_by_the_child_is_the_one_found_in_process_on_the_caller_s_move(
-        maker, planner, planned, default_cell):
-    move = planned.trajectory
+        maker, default_planner, station_move, default_cell):
+    move = station_move.trajectory
     find = maker.finder(move, default_cell.robot)
     for moment in (0.1 * move.duration, 0.4 * move.duration, 0.8 * move.duration):
         found, here = find(moment), controlled_stop(move, moment, default_cell.robot)
@@ -37,7 +26,8 @@ def test_a_stop_found_by_the_child_is_the_one_found_in_process_on_the_caller_s_m
         assert np.array_equal(found.trajectory.timing.states, here.trajectory.timing.states)
         assert np.array_equal(found.trajectory.breaks(), here.trajectory.breaks())
         # A draft only: verified by the caller as any stop.
-        prepared = planner.prepare_stop(move, moment, planned.verification, made=found)
+        prepared = default_planner.prepare_stop(move, moment, station_move.verification,
+                                                made=found)
         assert prepared is not None and prepared.verification.ok
     with pytest.raises(PlanningError) as raised:
         find(move.duration + 1.0)
@@ -45,9 +35,9 @@ def test_a_stop_found_by_the_child_is_the_one_found_in_process_on_the_caller_s_m
     assert maker.started == 1
 
 
-def test_a_child_that_ends_fails_one_stop_and_the_next_starts_another(maker, planned,
+def test_a_child_that_ends_fails_one_stop_and_the_next_starts_another(maker, station_move,
                                                                       default_cell):
-    move = planned.trajectory
+    move = station_move.trajectory
     find = maker.finder(move, default_cell.robot)
     find(0.5)
     maker._process.kill()

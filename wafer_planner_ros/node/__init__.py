@@ -9,7 +9,7 @@ published, ``messages`` and ``markers``; what is recorded, ``recording``; the Fo
 view, ``live`` (the node's side) over ``live_server`` (the WebSocket protocol), and the
 robot it shows, ``live_robot``; the QoS everything here uses, ``qos``; the process and its
 start-up, ``main``, ``process`` and ``startup``; failing safely, ``faults``; stop requests,
-``stops`` (their subscription and its waiting, ``stop_requests``); talking to a running node, ``client`` and ``replay_publish``; the simulated arm
-``wafer-sim``, ``sim``. How a request is planned is not decided here but in
-``service.planning``.
+``stops`` (their subscription and its waiting, ``stop_requests``); talking to a running
+node, ``client`` and ``replay_publish``; the simulated arm ``wafer-sim``, ``sim``. How a
+request is planned is not decided here but in ``service.planning``.
 """
