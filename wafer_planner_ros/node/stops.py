@@ -17,8 +17,8 @@ one answer, whatever happens. A plan request may start in motion too (``"from":
 {"trajectory": ..., "at": ...}``): ``divert`` plans it from a kept trajectory, on the
 planning thread like any plan.
 
-Stop requests come in on a node and executor of their own (``stop_requests``), which the
-stop thread spins (``serve``): a request is taken, answered, recorded and published by that
+Stop requests come in on a subscription of their own (``stop_requests``), which the stop
+thread waits on (``serve``): a request is taken, answered, published and recorded by that
 one thread (``deliver``: the node's publishing, called from it), never behind the node's
 executor. While a kept trajectory runs (its stamp passed, its end not yet: the latest
 such), a thread of its own makes its stops ahead of it (``service.prepared_stops``)
@@ -60,8 +60,8 @@ class Stops:
 
         ``serve(timeout)`` waits up to ``timeout`` s for a stop request and takes it in the
         calling thread, the stop thread (its callback calls ``answer``); False: no more
-        will come (``StopRequests.serve``). ``deliver(kind, message, number)`` records and
-        publishes an answer at once, in the calling thread; ``answer_error`` and
+        will come (``StopRequests.serve``). ``deliver(kind, message, number)`` publishes an
+        answer at once, in the calling thread, then records it; ``answer_error`` and
         ``answer_internal`` are the worker's (one answer per query, counted there);
         ``clock()`` is the node's time now, as the stamps are (``sec``, ``nanosec``);
         ``share()`` the share of a core making stops ahead may take now (0: none made).
