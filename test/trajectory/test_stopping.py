@@ -235,6 +235,30 @@ def test_a_joined_verification_checks_the_stretch_followed_and_the_join(planner,
     with pytest.raises(ValueError):  # a stop made ahead that is not verified
         verify_joined(curve, cell, q, end, (qd, qdd), result.verification, 0.013,
                       (made.stop.trajectory, Verification(problems=('no',))))
+    # A timing that goes on otherwise after the join (one phase's jerk changed): refused,
+    # though it joins and ends as the stop made ahead does.
+    jerks = curve.timing.jerks.copy()
+    jerks[len(jerks) // 2] *= 1.0 + 1e-9
+    other = Retimed(move, JerkProfile(curve.timing.starts, jerks, curve.timing.states))
+    checked = verify_joined(other, cell, q, end, (qd, qdd), result.verification, 0.013, then)
+    assert not checked.ok and 'ill-formed' in checked.problems[0]
+
+
+def test_a_stop_made_ahead_that_is_the_rest_of_the_move_answers_as_the_rest_joined(
+        planner, moves):
+    # Late in a time-optimal move the stop is its rest: the answer is the rest of the move
+    # from ``at``, checked only over the 13 ms followed and at the join.
+    result = moves['station']
+    move, at = result.trajectory, 0.85 * result.trajectory.duration
+    made = planner.prepare_stop(move, at + 0.013, result.verification)
+    assert made.stop.timing == 'rest'
+    stop = planner.stop(move, at, 'r1', verified=result.verification, ahead=made)
+    assert stop.verification.ok and stop.metrics['braking_from'] == at + 0.013
+    assert stop.metrics['timing'] == 'rest' and not stop.metrics['refused']
+    assert stop.cycle_time == pytest.approx(move.duration - at, abs=1e-12)
+    assert stop.verification.limit_samples <= made.verification.limit_samples + 15
+    t = np.linspace(0.0, stop.cycle_time, 40)
+    assert np.abs(stop.trajectory.evaluate(t) - move.evaluate(at + t)).max() <= 1e-12
 
 
 def test_a_stop_made_ahead_that_fails_its_verification_is_not_the_answer(planner, moves):

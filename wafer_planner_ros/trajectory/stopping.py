@@ -125,7 +125,8 @@ def followed(ahead: Stop, trajectory: Trajectory, at: float) -> Stop:
     ``ahead``: a stop of ``trajectory`` (``controlled_stop``) from a moment no earlier than
     ``at``. The move until that moment (sigma = t), then ``ahead``'s timing: the same limits
     hold on each part, and at the join sigma' = 1, sigma'' = 0 on both sides (the move's
-    own state). The rest of the move instead where that is no later at rest.
+    own state). The rest of the move instead where that is no later at rest (where
+    ``ahead`` is the rest of the move, the same motion, joined at its moment).
     Raise PlanningError as ``moving_state`` does; ValueError for a stop from before ``at``.
     """
     moving_state(trajectory, at)
@@ -138,8 +139,9 @@ def followed(ahead: Stop, trajectory: Trajectory, at: float) -> Stop:
     if moment == at:
         return ahead
     coast = moment - at
-    if ahead.timing == 'rest' or coast + timing.duration >= rest:
-        return rest_of(trajectory, at)
+    if ahead.timing != 'rest' and coast + timing.duration >= rest:
+        return rest_of(trajectory, at)  # braking there is no sooner at rest
+    # (Where ``ahead`` is the rest of the move, so is this: the move, joined at the moment.)
     phases = _coasted((timing.starts, timing.jerks, timing.states), at, coast)
     # Its breaks: where the move's own are crossed while it is followed (sigma = t), the
     # join (sigma'' = 0 there), then the stop's, later by ``coast``.

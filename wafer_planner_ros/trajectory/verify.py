@@ -39,6 +39,7 @@ from wafer_planner_ros.trajectory.retimed import Retimed
 LIMIT_STEP = 1e-3      # s
 COLLISION_STEP = 1e-3  # rad
 END_TOLERANCE = 1e-9   # rad/s, rad/s^2: "zero" at the ends, up to rounding
+SAME_START = 1e-12     # s: two phase starts that differ by rounding only
 
 
 @dataclass(frozen=True)
@@ -143,21 +144,23 @@ def verify_joined(trajectory: Retimed, cell, start: np.ndarray, goal: np.ndarray
     of the same base from the state reached, which passed its own verification (with
     ``base``) when it was made. So that part is not checked again. This checks the whole
     curve's timing (``Retimed.timing_problem``: sigma never moving back, on the base's
-    time, at rest at the end; the base's own form was checked when it passed ``base``)
-    and its ends as ``verify`` does, its limits over [0, ``coast``] every ``LIMIT_STEP``
+    time, at rest at the end; the base's own form was checked when it passed ``base``),
+    that from ``coast`` on its timing is ``then``'s phases exactly (later by ``coast``),
+    its ends as ``verify`` does, its limits over [0, ``coast``] every ``LIMIT_STEP``
     from 0, and that it joins ``then``'s curve in position, velocity and acceleration
     and ends where that does (to ``END_TOLERANCE``); its figures are the larger of the
     two parts'.
     """
-    if not (isinstance(trajectory, Retimed) and base.proven and then[1].ok and
-            then[1].on_base):
+    robot, (curve, rest) = cell.robot, then
+    if not (isinstance(trajectory, Retimed) and isinstance(curve, Retimed) and
+            curve.base is trajectory.base and base.proven and rest.ok and rest.on_base):
         raise ValueError('a joined verification needs a curve retimed along a verified path '
                          'and a verified stop made along it')
     # The base's form was checked when it passed ``base``; the ends are checked below.
-    problem = trajectory.timing_problem()
+    problem = trajectory.timing_problem() or \
+        _goes_on_as(trajectory.timing, curve.timing, coast)
     if problem is not None:
         return Verification(problems=(f'ill-formed curve: {problem}',))
-    robot, (curve, rest) = cell.robot, then
     t = limit_times(coast)
     # The limit check's times, then the join and the end: one evaluation.
     every = trajectory.evaluate_orders(np.append(t, [coast, trajectory.duration]), range(4))
@@ -180,6 +183,21 @@ def verify_joined(trajectory: Retimed, cell, start: np.ndarray, goal: np.ndarray
         peak_wafer_jerk=max(peak_wafer_jerk, rest.peak_wafer_jerk),
         port_ratios=base.port_ratios, limit_samples=len(t) + rest.limit_samples,
         proof=base.proof, on_base=True)
+
+
+def _goes_on_as(timing, then, coast: float) -> Optional[str]:
+    """
+    Return how ``timing`` from ``coast`` on is not ``then``'s phases, later by ``coast``.
+
+    The same jerks and phase states exactly, the phase starts to ``SAME_START`` s: then the
+    two curves on one base are the same motion from there.
+    """
+    k = len(timing.jerks) - len(then.jerks)
+    if k < 1 or not (np.array_equal(timing.jerks[k:], then.jerks) and
+                     np.array_equal(timing.states[k:], then.states) and
+                     np.abs(timing.starts[k:] - coast - then.starts).max() <= SAME_START):
+        return f'it does not go on from {coast:.6g} s as the verified stop it joins'
+    return None
 
 
 def _limit_problems(states: States, robot) -> tuple:
