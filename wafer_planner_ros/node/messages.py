@@ -17,7 +17,8 @@ class Sent(enum.Enum):
     """What the worker hands the executor to publish: (kind, message, query number)."""
 
     ANSWER = enum.auto()
-    """(trajectory, result): recorded together, then published in that order."""
+    """(trajectory, result): recorded together, then published in that order (a stop's:
+    published, then recorded)."""
     RESULT = enum.auto()
     """An error's result alone."""
     MARKERS = enum.auto()

@@ -5,20 +5,20 @@ Threads: a single-threaded executor (subscriptions, services, the diagnostics ti
 publishing: every callback is short), the worker's four (``worker``: one plans, one request
 at a time; one answers the station pairs the table holds; a watchdog answers ``TIMEOUT`` at
 every deadline; its loader's, ``loader``, loads or rebuilds the roadmap while the previous
-one serves; the compiled kernels release the GIL), the stops' two (``stops``: one takes
-the stop requests on a node and executor of its own, ``stop_requests``, and answers them
-there; one makes stops ahead of the running move), the one loading the kernels from the
-process's start (``startup``; with one more saying when they are being compiled, if they
-must be), the recorder's (``node.recording``) and, with ``live.port`` set, the Foxglove
-server's (``live``, ``live_server``). Requests are handed to the recording (which writes each
-with its answers, a query whole in one file), read and checked in the subscription
-callback, then handed to the worker. The worker hands every answer back through a guard
-condition, so all its publishing happens on the executor; the stop thread publishes its
-answers itself (``_deliver_now``), at once. Each answer is recorded before it goes out;
-each request gets exactly one ``~/result``, whatever happens: no request, however
-malformed, and no failure while answering it ends the node (a failure of the node's own
-is answered ``INTERNAL``). What ``/diagnostics`` says is ``health``'s; recording switched
-on and off, ``recording_switch``'s.
+one serves; the compiled kernels release the GIL), the stops' two (``stops``: one waits on
+the stop requests' own subscription, on a node no executor spins, ``stop_requests``, and
+answers them there; one makes stops ahead of the running move), the one loading the kernels
+from the process's start (``startup``; with one more saying when they are being compiled,
+if they must be), the recorder's (``node.recording``) and, with ``live.port`` set, the
+Foxglove server's (``live``, ``live_server``). Requests are handed to the recording (which
+writes each with its answers, a query whole in one file), read and checked in the
+subscription callback, then handed to the worker. The worker hands every answer back
+through a guard condition, so all its publishing happens on the executor; the stop thread
+publishes its answers itself (``_deliver_now``), at once. Each answer is recorded before it
+goes out (a stop's right after); each request gets exactly one ``~/result``, whatever
+happens: no request, however malformed, and no failure while answering it ends the node (a
+failure of the node's own is answered ``INTERNAL``). What ``/diagnostics`` says is
+``health``'s; recording switched on and off, ``recording_switch``'s.
 """
 
 from collections import deque
