@@ -12,8 +12,10 @@ the verification of stops made ahead call kernels every few microseconds to
 milliseconds. Nothing else changes: a paused computation goes on where it was.
 
 The operating system is asked the same (``background``): the threads whose work nobody
-waits for from one moment to the next (planning, the roadmap's load) run at a lower
-scheduling priority, so that on a busy machine an urgent thread waking up gets a core.
+waits for (the roadmap's load, the stops made ahead) run at a lower scheduling priority,
+so that on a busy machine an urgent thread waking up gets a core. Planning does not: a
+planning thread at a lower priority took its next request later on a busy machine, and a
+burst of requests then found the queue full.
 """
 
 from contextlib import contextmanager

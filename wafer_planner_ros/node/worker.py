@@ -26,7 +26,7 @@ import threading
 import time
 from typing import Callable, Optional
 
-from wafer_planner_ros import giving_way, kernels, kernels_lookup
+from wafer_planner_ros import kernels, kernels_lookup
 from wafer_planner_ros.cell.model import Cell
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.node import markers, messages
@@ -87,7 +87,7 @@ class PlanningWorker:
                            self._logger, stamp, lambda: self._settings().stops_ahead_share)
         """The published trajectories and the stop requests' own thread (``stops``)."""
         self._threads = [threading.Thread(target=target, name=name, daemon=True) for name, target
-                         in (('wafer_planner_worker', lambda: self._work(self._backlog, True)),
+                         in (('wafer_planner_worker', lambda: self._work(self._backlog)),
                              ('wafer_planner_table', lambda: self._work(self._lane)),
                              ('wafer_planner_watchdog', self._watch))]
         for thread in self._threads:
@@ -236,14 +236,8 @@ class PlanningWorker:
             return f'roadmap not loaded: {loader.last_load_error}'
         return NOT_LOADED
 
-    def _work(self, queue: deque, background: bool = False) -> None:
-        """
-        Answer the requests of ``queue`` one at a time until stopped.
-
-        ``background``: at a lower scheduling priority (``giving_way.background``: planning).
-        """
-        if background:
-            giving_way.background()
+    def _work(self, queue: deque) -> None:
+        """Answer the requests of ``queue`` one at a time until stopped."""
         while True:
             with self.lock:
                 while not queue and self._loader.phase is not Phase.STOPPING:
