@@ -40,8 +40,18 @@ def test_a_child_that_ends_fails_one_stop_and_the_next_starts_another(maker, sta
     move = station_move.trajectory
     find = maker.finder(move, default_cell.robot)
     find(0.5)
-    maker._process.kill()
+    # Ended while it seemed alive (its end not yet seen): the stop asked of it fails.
+    process = maker._process
+    process.kill()
+    process.wait()
+    alive = process.poll
+    process.poll = lambda: None
     with pytest.raises(RuntimeError, match='the stop maker ended'):
         find(0.6)
+    process.poll = alive
     assert find(0.6).trajectory.base is move  # the move handed to the new child again
     assert maker.started == 2
+    # Seen ended before a stop is asked: another starts at once, nothing fails.
+    maker._process.kill()
+    maker._process.wait()
+    assert find(0.7).trajectory.base is move and maker.started == 3
