@@ -8,16 +8,20 @@ optimiser unbudgeted against the loaded limit set: every station pair
 other than its start and goal). Per divert:
 
 - ours: ``Planner.divert(move, at, station)``, verified as every answer is: its cycle time
-  (from the moment it leaves the move until it rests at the new station), its parts (the
-  controlled stop, then the move from where it rests), its method and its planning ms;
+  (from the moment it leaves the move until it rests at the new station), its method (one
+  curve from the moving state, ``blended-divert``, where one is found within
+  ``BLEND_SECONDS``, else the controlled stop then the move from where it rests), the
+  stop then the move's time either way, and its planning ms;
 - the move from rest at the same point: ``Planner.plan(q(at), station)``, as if the robot
   stood still where it was diverted (what a planner that plans from rest alone would be
   asked, a robot it had first stopped abruptly). Ours over it says what leaving a moving
   robot costs.
 
-Reported: ours / from rest (median, p90, max), the stop's share of ours, planning ms of
-ours (median, p99, max) and of the move from rest. Writes ``bench/results/divert.json``
-(every row, the summary, the machine and commit); prints a table.
+Reported: ours / from rest (median, p90, max), the stop's share of the stop then the
+move, planning ms of ours (median, p99, max) and of the move from rest, how many diverts
+are one curve and what those take against the stop then the move. Writes
+``bench/results/divert.json`` (every row, the summary, the machine and commit); prints a
+table.
 
 Run: ``python bench/bench_divert.py [--moments 5] [--moves N]``.
 """
@@ -32,6 +36,7 @@ from wafer_planner_ros.cell.model import Cell, default_cell_path
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.planner.stop import BLENDED
 from wafer_planner_ros.roadmap.cache import load_or_build
 from wafer_planner_ros.trajectory.methods import WholeCurve
 
@@ -63,8 +68,10 @@ def divert_row(planner, move, at: float, station: str, label: str) -> dict:
     metrics = diverted.metrics
     row.update(error=None, cycle_time=diverted.cycle_time, method=metrics['divert'],
                stop_time=metrics['stop_time'], onward_time=metrics['onward_time'],
+               stop_then_move=metrics['stop_then_move_time'],
                from_rest=from_rest.cycle_time, ratio=diverted.cycle_time / from_rest.cycle_time,
-               stop_share=metrics['stop_time'] / diverted.cycle_time, ms=ms,
+               against_stopping=diverted.cycle_time / metrics['stop_then_move_time'],
+               stop_share=metrics['stop_time'] / metrics['stop_then_move_time'], ms=ms,
                timings_ms=dict(diverted.timings_ms), from_rest_ms=rest_ms,
                verified=bool(diverted.verification.ok))
     return row
@@ -81,6 +88,9 @@ def summary_of(rows) -> dict:
             'ms': _stats((r['ms'] for r in ok), 'p99'),
             'from_rest_ms': _stats((r['from_rest_ms'] for r in ok), 'p99'),
             'methods': sorted({r['method'] for r in ok}),
+            'blended': sum(r['method'] == BLENDED for r in ok),
+            'blended_against_stopping': _stats(r['against_stopping'] for r in ok
+                                               if r['method'] == BLENDED),
             'all_verified': all(r['verified'] for r in ok)}
 
 
@@ -90,7 +100,7 @@ def _line(name: str, s: dict) -> str:
     r, ms, rest = s['ratio'], s['ms'], s['from_rest_ms']
     return (f"{name:<30}{r['median']:>7.3f}{r['p90']:>7.3f}{r['max']:>7.3f}"
             f"{s['stop_share']['median']:>7.2f}{ms['median']:>8.1f}{ms['p99']:>8.1f}"
-            f"{ms['max']:>8.1f}{rest['median']:>8.1f}{s['errors']:>5d}")
+            f"{ms['max']:>8.1f}{rest['median']:>8.1f}{s['blended']:>6d}{s['errors']:>5d}")
 
 
 def main() -> int:
@@ -117,13 +127,18 @@ def main() -> int:
               file=sys.stderr, flush=True)
     overall = summary_of(rows)
     print(f"{'move => diverted to':<30}{'ratio':>7}{'p90':>7}{'max':>7}{'stop':>7}{'ms':>8}"
-          f"{'p99':>8}{'max':>8}{'rest ms':>8}{'err':>5}")
+          f"{'p99':>8}{'max':>8}{'rest ms':>8}{'blend':>6}{'err':>5}")
     for name, s in list(summaries.items()) + [('[all]', overall)]:
         print(_line(name, s))
     print(f"diverted / from rest at the same point: median {overall['ratio']['median']:.3f}, "
           f"max {overall['ratio']['max']:.3f}; planning median {overall['ms']['median']:.0f} "
           f"ms, p99 {overall['ms']['p99']:.0f} ms; methods {overall['methods']}; every one "
           f"verified: {overall['all_verified']}; errors {overall['errors']}")
+    gain = overall['blended_against_stopping']
+    if gain:
+        print(f"one curve from the moving state in {overall['blended']} of "
+              f"{overall['diverts']}: / the stop then the move median {gain['median']:.3f}, "
+              f"max {gain['max']:.3f}")
     written(RESULTS, 'diverted moves on the default cell (roadmap seed 0, whole-curve, '
             'loaded) against the move from rest at the same point',
             {'moments_per_move': args.moments, 'summary': overall, 'moves': summaries,

@@ -91,8 +91,8 @@ def test_node_process_answers_the_client_and_stops_on_sigint(
                            'loadlock1')
         assert diverted.returncode == 0, diverted.stdout + diverted.stderr
         assert re.search(r'^p6-divert: ok: p6 at \d+\.\d+ s -> loadlock1, cycle time .*\n  '
-                         r'cycle time \d+\.\d{3} s.*\(stop-then-move, ', diverted.stdout,
-                         re.M), diverted.stdout
+                         r'cycle time \d+\.\d{3} s.*\((stop-then-move|blended-divert), ',
+                         diverted.stdout, re.M), diverted.stdout
     finally:
         node.send_signal(signal.SIGINT)
         output, _ = node.communicate(timeout=60)

@@ -265,4 +265,6 @@ def test_a_divert_is_planned_as_a_joint_request_is_within_the_budget(
     assert got['code'] == 'OK' and float(got['budget']) == pytest.approx(0.12)
     # Planned within its budget by the knot timing instead, a divert of a station move
     # took 4.6 x as long as this (14.6 s against 3.2 s): its onward move the corridor's.
-    assert float(got['cycle_time']) <= 1.2 * core.cycle_time
+    # (Against the core's stop then move: the one curve from the moving state, where one
+    # is found within its time, is faster still.)
+    assert float(got['cycle_time']) <= 1.2 * core.metrics['stop_then_move_time']

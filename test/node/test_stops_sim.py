@@ -208,7 +208,9 @@ def test_a_moving_arm_diverted_follows_the_move_then_the_divert_without_a_jump(
                            'to': 'loadlock1'})
     result = harness.result('divert')
     assert values(result)['code'] == 'OK', result.message
-    assert values(result)['method'] == 'stop-then-move'
+    # One curve from the moving state where the optimiser finds one in time, else the
+    # stop then the move: either joins the move without a jump.
+    assert values(result)['method'] in ('stop-then-move', 'blended-divert')
     diverted = _published(harness, 'divert')
     assert time.time() < began + at, 'the divert came after the moment it leaves the move at'
     assert _seconds(diverted.header.stamp) == pytest.approx(began + at, abs=1e-6)

@@ -18,8 +18,13 @@ from scipy.interpolate import BSpline
 STEP = 1e-4  # s, time step of the checks
 
 
-def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
-    """Assert everything a user relies on; return the measured ratios."""
+def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray, moving=None) -> dict:
+    """
+    Assert everything a user relies on; return the measured ratios.
+
+    ``moving``: the velocity and acceleration a curve that continues a motion (kind
+    ``continuing-b-spline``) must start with; None: it starts at rest.
+    """
     robot = cell.robot
     limits = robot.limit_sets[plan['load']]  # loaded: the wafer limit too; empty: not
     curve = _curve(plan['spline'])
@@ -32,7 +37,9 @@ def check(cell, plan: dict, start: np.ndarray, goal: np.ndarray) -> dict:
     assert np.array_equal(points[0], start) and np.array_equal(points[-1], goal)
     assert np.allclose(q[[0, -1]], [start, goal], rtol=0, atol=1e-12)
     # scipy's recursion divides by spans as short as 1 ms: zero comes out as ~1e-9.
-    assert np.abs(qd[[0, -1]]).max() < 1e-6 and np.abs(qdd[[0, -1]]).max() < 1e-6
+    begins = np.zeros((2, len(start))) if moving is None else np.asarray(moving, float)
+    assert np.abs(qd[0] - begins[0]).max() < 1e-6 and np.abs(qd[-1]).max() < 1e-6
+    assert np.abs(qdd[0] - begins[1]).max() < 1e-6 and np.abs(qdd[-1]).max() < 1e-6
     # Joint limits.
     lower, upper = limits.joints.position.T
     assert np.all(q >= lower) and np.all(q <= upper)
@@ -102,7 +109,7 @@ def port_ratios(cell, q: np.ndarray) -> dict:
 
 def _curve(described: dict):
     """Return the exported curve as a callable curve(t, order) with duration and ends."""
-    if described.get('kind', 'cubic-b-spline') == 'cubic-b-spline':
+    if described.get('kind', 'cubic-b-spline') in ('cubic-b-spline', 'continuing-b-spline'):
         return _Spline(described)
     assert described['kind'] == 'through-ports', described.get('kind')
     return _PortMove(described)

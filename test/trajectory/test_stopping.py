@@ -295,7 +295,12 @@ def test_a_stop_that_follows_the_move_first_starts_exactly_in_its_state(planner,
 @pytest.mark.parametrize('fraction', [0.2, 0.5, 0.8])
 def test_a_divert_starts_in_the_moving_state_and_ends_exactly_at_the_new_goal(
         planner, fraction):
-    """The stop then the move from rest as one verified curve (at 0.2 it once missed its goal)."""
+    """
+    The divert as one verified curve from the moving state (at 0.2 it once missed its goal).
+
+    The stop then the move from rest, or one curve from the moving state where that is
+    found in time and faster (``test_divert``).
+    """
     move = planner.plan('loadlock1', 'loadport3').trajectory
     at = fraction * move.duration
     diverted = planner.divert(move, at, 'loadport1')
@@ -309,4 +314,7 @@ def test_a_divert_starts_in_the_moving_state_and_ends_exactly_at_the_new_goal(
     assert np.abs(np.concatenate([v1, a1])).max() <= 1e-9
     assert verify(curve, planner.cell, q, diverted.goal_q, moving=(qd, qdd)).ok
     metrics = diverted.metrics
-    assert curve.duration == pytest.approx(metrics['stop_time'] + metrics['onward_time'])
+    if metrics['divert'] == 'stop-then-move':
+        assert curve.duration == pytest.approx(metrics['stop_time'] + metrics['onward_time'])
+    else:  # one curve from the moving state (test_divert), faster
+        assert curve.duration < metrics['stop_then_move_time']

@@ -6,9 +6,11 @@ after its start, on its own path, as fast as the planner's limit set allows
 (``trajectory.stopping``); the answer starts exactly in the curve's state there (its
 velocity and acceleration included) and is verified as every answer is, that start motion
 with it. ``divert(planner, trajectory, at, goal, label)`` leaves the move at ``at`` for a
-new goal: for now always its controlled stop, then the move from rest where it stops to
-the goal, as one trajectory (``chained.Chained``), verified whole; its ``metrics`` say so
-(``divert``: ``'stop-then-move'``).
+new goal: its controlled stop, then the move from rest where it stops to the goal, as one
+trajectory (``chained.Chained``), verified whole; or, faster, one curve from the moving
+state to the goal (``continuing``), continuous in acceleration at the join, proven and
+verified; its ``metrics`` say which (``divert``: ``'stop-then-move'`` or
+``'blended-divert'``) and how long the other took.
 """
 
 from dataclasses import dataclass
@@ -21,7 +23,9 @@ import numpy as np
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner.endpoints import Endpoint
 from wafer_planner_ros.planner.result import answer, LENGTH_SAMPLES, path_lengths, PlanResult
+from wafer_planner_ros.trajectory.bspline import CubicBSpline
 from wafer_planner_ros.trajectory.chained import Chained
+from wafer_planner_ros.trajectory.continuing import Continuing, draft, pinned_start
 from wafer_planner_ros.trajectory.jerk_profile import JerkProfile
 from wafer_planner_ros.trajectory.retimed import Retimed
 from wafer_planner_ros.trajectory.stopping import controlled_stop, followed, moving_state
@@ -32,6 +36,15 @@ METHOD = 'controlled-stop'
 """The method a stop's answer names."""
 DIVERT = 'stop-then-move'
 """The method a diverted move's answer names: its stop, then the move from rest."""
+BLENDED = 'blended-divert'
+"""The method a diverted move's answer names when it is one curve from the moving state."""
+BLEND_SECONDS = 0.5
+"""s: the longest a divert's one curve is optimised (less within a budget)."""
+FIRST_SPANS = np.array([0.125, 0.125, 0.25, 0.5])
+"""The first of a divert's draft's even spans split so (``_blended``): the motion given at
+the start is followed closely at first, where the robot brakes or turns fastest."""
+STOP_SPANS = 4
+"""Spans of the second draft of a divert's one curve over the stop's time (``_blended``)."""
 
 
 @dataclass(frozen=True)
@@ -167,30 +180,85 @@ def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
     """
     Return the verified move from ``trajectory`` at ``at`` to ``goal`` (the module).
 
-    ``goal``: a station name or joint angles; ``deadline`` and ``until`` as for the
-    planner's moves from rest. Raise PlanningError as ``stop`` and the move to the goal do.
+    The controlled stop, then the move from rest to ``goal``, verified as one trajectory;
+    then, where that move is a curve of the method's (not through a port), one curve from
+    the moving robot's state (``continuing``) fitted to it and optimised within
+    ``BLEND_SECONDS`` (or the budget), verified: the faster verified one is the answer,
+    its method saying which (``DIVERT``, ``BLENDED``). ``goal``: a station name or joint
+    angles; ``deadline`` and ``until`` as for the planner's moves from rest. Raise
+    PlanningError as ``stop`` and the move to the goal do, VERIFICATION_FAILED when
+    neither passes.
     """
     begun = time.perf_counter()
     q, qd, qdd = moving_state(trajectory, at)
     halted = stop(planner, trajectory, at, label)
-    rested = halted.goal_q
-    onward = planner.planned(rested, goal, deadline, until)
-    curve = Chained([halted.trajectory, onward.trajectory])
+    onward = planner.planned(halted.goal_q, goal, deadline, until)
+    chain = Chained([halted.trajectory, onward.trajectory])
     checked = time.perf_counter()
-    verification = verify(curve, planner.cell, q, onward.goal_q, moving=(qd, qdd))
+    verification = verify(chain, planner.cell, q, onward.goal_q, moving=(qd, qdd))
+    verified = time.perf_counter()
+    curve, method, refused = chain, DIVERT, list(verification.problems)
+    if isinstance(onward.trajectory, CubicBSpline):
+        blended, blend_refused = _blended(planner, chain, onward, (q, qd, qdd), deadline)
+        refused += blend_refused
+        if blended is not None and (not verification.ok or
+                                    blended[0].duration < chain.duration):
+            curve, verification, method = *blended, BLENDED
     if not verification.ok:
         raise PlanningError(ErrorCode.VERIFICATION_FAILED,
                             f'the move from {label} at {at:.6g} s to {onward.goal.label} '
-                            'failed its verification: ' + '; '.join(verification.problems))
+                            'failed its verification: ' + '; '.join(refused))
     done = time.perf_counter()
     start = Endpoint(f'{label} at {at:.6g} s', ((None, q),))
     timings = {f'onward.{k}': v for k, v in onward.timings_ms.items() if k != 'total'}
     return answer(planner, start, onward.goal, q, onward.goal_q,
                   (None, onward.branches[1]), curve, curve.duration, verification,
                   onward.roadmap_path, onward.path,
-                  {'diverted_at': float(at), 'divert': DIVERT,
-                   'stop_time': halted.cycle_time, 'onward_time': onward.cycle_time},
-                  onward.metrics.get('control_points', 0), method=DIVERT,
+                  {'diverted_at': float(at), 'divert': method,
+                   'stop_time': halted.cycle_time, 'onward_time': onward.cycle_time,
+                   'stop_then_move_time': chain.duration, 'refused': refused},
+                  len(getattr(curve, 'control_points', ())) or
+                  onward.metrics.get('control_points', 0), method=method,
                   timings_ms={'stop': halted.timings_ms['total'], **timings,
-                              'verify': 1e3 * (done - checked),
+                              'verify': 1e3 * (verified - checked),
+                              'blend': 1e3 * (done - verified),
                               'total': 1e3 * (done - begun)})
+
+
+def _blended(planner, chain: Chained, onward: PlanResult, state: tuple,
+             deadline) -> tuple:
+    """
+    Return ((curve, verification) or None, what was refused) for ``divert``'s one curve.
+
+    Drafts fitted to the stop-then-move ``chain`` (``continuing.draft``): with
+    ``ShapeSettings.min_spans`` even spans, then with the stop's time in ``STOP_SPANS``
+    spans and the onward move's own spans after them; each optimised from the moving
+    ``state`` (q, q', q'') to ``onward``'s goal (``CurveMethod.blend``, to beat the
+    chain), the first verified returned.
+    """
+    q, qd, qdd = state
+    start = pinned_start(qd, qdd)
+    if start is None:
+        return None, []
+    # Its own time: the budget, if any, was the onward move's.
+    until = time.monotonic() + BLEND_SECONDS
+    halted, moving = chain.parts[0].duration, onward.trajectory
+    spans = planner.method.shape.min_spans
+    refused = []
+    even = chain.duration / spans
+    for intervals in (np.concatenate([even * FIRST_SPANS, np.full(spans - 1, even)]),
+                      np.concatenate([np.full(STOP_SPANS, halted / STOP_SPANS),
+                                      moving.intervals])):
+        if time.monotonic() >= until:
+            break
+        fitted = draft(chain, qd, qdd, intervals)
+        shaped = planner.method.blend(fitted, (start, None),
+                                      chain.duration, until, deadline, proven=False)
+        if shaped is None:
+            continue
+        curve = Continuing(shaped.trajectory.knots, shaped.trajectory.control_points)
+        verification = verify(curve, planner.cell, q, onward.goal_q, moving=(qd, qdd))
+        if verification.ok:
+            return (curve, verification), refused
+        refused.append('one curve: ' + '; '.join(verification.problems))
+    return None, refused

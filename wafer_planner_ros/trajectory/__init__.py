@@ -6,7 +6,8 @@ check, its order in time), with compiled rows in ``rows``; the safe corridor, ``
 the curve interface everything after the planner uses, ``curve`` (the B-spline:
 ``bspline``); the knot-time optimiser, ``timing_problem`` and ``timing``; the whole-curve
 optimiser, ``shape_problem``, ``coarse`` and ``shape`` on ``sqp``; their settings,
-``tuning``; a way to shape and time a curve, chosen by ``PlannerSettings.method``,
+``tuning``; a curve that continues a motion (a divert), ``continuing``, and curves played
+in turn, ``chained``; a way to shape and time a curve, chosen by ``PlannerSettings.method``,
 ``methods``; the collision proof, ``proof``; the dense check every answer passes,
 ``verify``; where a motion comes closest to a wall, ``approach``; timed parts of a plan,
 ``stopwatch``.

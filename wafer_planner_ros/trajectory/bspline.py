@@ -152,6 +152,9 @@ class CubicBSpline(Trajectory):
     """A clamped cubic B-spline q(t) in joint space."""
 
     kind: ClassVar[str] = 'cubic-b-spline'
+    starts_at_rest: ClassVar[bool] = True
+    """Whether the curve must start at rest (``ill_formed``); a kind that continues a
+    motion does not (``continuing.Continuing``)."""
 
     knots: np.ndarray
     """(n + 5,) times (s)."""
@@ -216,7 +219,8 @@ class CubicBSpline(Trajectory):
         Its knots must be finite, four more than the control points, the first four 0, the
         last four one time T and those between increasing (every span lasts); the control
         points must be finite, the first two exactly ``start`` and the last two exactly
-        ``goal`` (equal neighbours: zero velocity at the ends).
+        ``goal`` (equal neighbours: zero velocity at the ends), the second only where the
+        kind starts at rest (``starts_at_rest``).
         """
         problem = self.structure_problem(len(np.asarray(start)))
         if problem is not None:
@@ -228,6 +232,8 @@ class CubicBSpline(Trajectory):
         for i, end, name, why in ((0, start, 'start', ''), (last, goal, 'goal', ''),
                                   (1, start, 'start', at_rest.format('start')),
                                   (last - 1, goal, 'goal', at_rest.format('end'))):
+            if i == 1 and not self.starts_at_rest:
+                continue  # its motion there is the caller's to compare (``verify``)
             if not np.array_equal(points[i], end):
                 return f'control point {i} is {points[i].tolist()}, not the {name} ' \
                     f'{end.tolist()}{why}'

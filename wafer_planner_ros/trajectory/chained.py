@@ -1,8 +1,9 @@
 """
 Curves played one after the other as one motion: a controlled stop, then a move from rest.
 
-A move diverted while it moves is, for now, its controlled stop (``retimed.Retimed``) and
-the move from where that stop rests to the new goal, as one trajectory. ``Chained`` plays
+A move diverted while it moves, where no one curve from its moving state is found
+(``continuing``), is its controlled stop (``retimed.Retimed``) and the move from where
+that stop rests to the new goal, as one trajectory. ``Chained`` plays
 its parts in turn: each part starts exactly where the one before it ends, in position, and
 at rest in velocity and acceleration (where a stop ends and a move from rest begins), so
 the motion is continuous in acceleration by construction; its pieces are the parts'.

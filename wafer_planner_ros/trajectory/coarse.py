@@ -45,7 +45,7 @@ def fitted_points(polygon: np.ndarray, spans: int) -> np.ndarray:
     count = spans + DEGREE
     knots = np.concatenate([np.zeros(DEGREE), np.linspace(0.0, 1.0, spans + 1),
                             np.ones(DEGREE)])
-    basis = _basis(knots, u)                                         # (FIT_SAMPLES, count)
+    basis = basis_values(knots, u)                                       # (FIT_SAMPLES, count)
     points = np.empty((count, polygon.shape[1]))
     points[:DEGREE], points[-DEGREE:] = polygon[0], polygon[-1]
     free = slice(DEGREE, count - DEGREE)
@@ -61,7 +61,7 @@ def coarse_start(polygon: np.ndarray, spans: int, robot, timing) -> CubicBSpline
     return CubicBSpline.from_intervals(points, intervals)
 
 
-def _basis(knots: np.ndarray, u: np.ndarray) -> np.ndarray:
+def basis_values(knots: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Return every cubic B-spline basis function (len(knots) - 4) at u in [0, 1] (Cox-de Boor)."""
     last = len(knots) - 1
     # Degree 0: the span holding u (the last one holds u = 1).

@@ -86,15 +86,17 @@ class CurveMethod(ABC):
         """
 
     def blend(self, transfer: CubicBSpline, ends, give_up_above: Optional[float] = None,
-              until: Optional[float] = None,
-              deadline: Optional[float] = None) -> Optional[Shaped]:
+              until: Optional[float] = None, deadline: Optional[float] = None,
+              proven: bool = True) -> Optional[Shaped]:
         """
         Return ``transfer`` made to move on at its free ends, or None (see ``ShapeProblem``).
 
         ``ends``: the start's and the goal's ``FreeEnd`` (None: at rest there). ``transfer``
-        is at rest at both ends, proven and within every limit. None when the method does
-        not blend (the move then stops at those ends), or once the curve and its ends
-        cannot beat ``give_up_above`` s together. The default: no blending.
+        is at rest at both ends, proven and within every limit; or, not ``proven``, a
+        draft that already moves at a pinned end (``continuing.draft``), which is never
+        returned itself. None when the method does not blend (the move then stops at
+        those ends), when nothing is proven, or once the curve and its ends cannot beat
+        ``give_up_above`` s together. The default: no blending.
         """
         return None
 
@@ -271,8 +273,8 @@ class WholeCurve(KnotTiming):
                       (timed.warnings if timed else ()) + warnings, fallback)
 
     def blend(self, transfer: CubicBSpline, ends, give_up_above: Optional[float] = None,
-              until: Optional[float] = None,
-              deadline: Optional[float] = None) -> Optional[Shaped]:
+              until: Optional[float] = None, deadline: Optional[float] = None,
+              proven: bool = True) -> Optional[Shaped]:
         """
         Return the whole-curve optimisation of ``transfer`` with its free ends (``blend``).
 
@@ -284,7 +286,7 @@ class WholeCurve(KnotTiming):
         shaped = optimise_shape(transfer, self.cell, replace(self.shape, min_spans=spans),
                                 self.settings, give_up_above,
                                 min((t for t in (until, _half_way(deadline)) if t is not None),
-                                    default=None), proven=True, ends=ends,
+                                    default=None), proven=proven, ends=ends,
                                 keep_out=_keeps_out(until, deadline))
         if shaped is None or not shaped.improved:
             return None

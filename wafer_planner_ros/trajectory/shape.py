@@ -47,11 +47,17 @@ from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import peaks_over, single_blas_thread
 from wafer_planner_ros.trajectory.timing_problem import TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
+from wafer_planner_ros.trajectory.verify import limit_ratios
 
 logger = logging.getLogger(__name__)
 
 FAILED_SLOWER = 100.0
 """An answer this many times slower than the start is a failed solve, not a curve."""
+PINNED_ROW_NORM = 1e-9
+"""A row of a problem with a pinned end (``ShapeProblem.pinned``) whose Jacobian is smaller
+than this depends on the pinned motion alone (e.g. the wafer's acceleration at the start):
+it is rounding, not a direction, and the row is dropped (it holds as the motion it
+continues does)."""
 SCAN_STEP = 0.002
 """s: where a curve is not proven, the step at which it is scanned for every stretch nearer
 a wall than its samples keep (``_too_near``)."""
@@ -152,7 +158,14 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             rescale = limits.scale_factor(intervals, ratio.max())
             scaled = rescale * intervals
             reference = problem.start if best is None else best
-            if problem.total_of(points, scaled) >= problem.total(reference):
+            if problem.pinned:
+                # Slowed, it would no longer move on as its pinned end does: kept only as
+                # solved, where that meets every limit as the verification checks them
+                # (else solved again, with the wafer's peaks sampled).
+                scaled = intervals
+                within = all(ratio <= 1.0 for ratio in limit_ratios(
+                    CubicBSpline.from_intervals(points, scaled), cell.robot).values())
+            elif problem.total_of(points, scaled) >= problem.total(reference):
                 # Scaled, it cannot be kept: not checked every millisecond as a curve that
                 # may be kept is, which costs time in proportion to its length (an answer
                 # stopped mid-solve, far over the limits, can scale to an hour's motion).
@@ -162,6 +175,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             else:
                 scaled = limits.meet_limits(scaled)[0]
             curve = CubicBSpline.from_intervals(points, scaled)
+            within = within if problem.pinned else True
         with timed('optimise.proof'):
             proof = prove(curve, problem.model, problem.model.lipschitz)
         logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '
@@ -177,9 +191,10 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             current = curve  # feasible everywhere: the next solve starts there
             # Kept only if faster than the best so far, or than the start when it is not
             # proven (a failed solve can end on a far slower curve that is still proven).
-            if problem.total(curve) < problem.total(problem.start if best is None else best):
+            if within and problem.total(curve) < problem.total(
+                    problem.start if best is None else best):
                 best = curve
-            if first_proven or rescale <= 1.0 + timing.rescale_tolerance:
+            if first_proven or (within and rescale <= 1.0 + timing.rescale_tolerance):
                 break
         else:
             if result.converged:
@@ -195,7 +210,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             more = _clearance_samples(problem, *_at_times(curve, times), every_body=True,
                                       curve=curve)
             clearance = tuple(np.concatenate([a, b]) for a, b in zip(clearance, more))
-        if rescale > 1.0 + timing.rescale_tolerance:
+        if rescale > 1.0 + timing.rescale_tolerance or not within:
             # Between samples the wafer limit was exceeded: sample the peaks.
             peaks = peaks_over(ratio, timing.margin * (1.0 + 2e-4))
             wafer = (np.append(wafer[0], dense_span[peaks]),
@@ -315,7 +330,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
         if x is x0:
             first = (values, jacobian)
     norms = np.maximum(*norms)
-    keep = norms > 1e-12
+    keep = norms > (PINNED_ROW_NORM if problem.pinned else 1e-12)
     weights = 1.0 / norms[keep]
 
     def linearised(x):

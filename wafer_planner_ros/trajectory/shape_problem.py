@@ -27,6 +27,9 @@ from wafer_planner_ros.trajectory.constraints import limit_constraints, position
 from wafer_planner_ros.trajectory.constraints import wafer_bound
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
 
+PINNED_MARGIN = 0.999
+"""Of the timing's margin, what the rows of a problem with a pinned end keep (a curve
+that cannot be slowed as a whole must meet every limit as solved)."""
 KEEP_OUT_SAMPLES = 400
 """Configurations of a start curve checked against the keep-outs round the ports' mouths
 (``breaks_keep_outs``)."""
@@ -54,6 +57,8 @@ class FreeEnd:
     reach: Callable[[float], float]
     reach_slope: Callable[[float], float]
     least_time: float
+    pinned: Optional[Tuple[float, float]] = None
+    """(v, a) the end has, whatever the optimiser does (``pinned_start``); None: free."""
 
     def state(self, points: np.ndarray, intervals: np.ndarray) -> tuple:
         """Return (v, a) of a curve's end (points and intervals in the end's own order)."""
@@ -65,6 +70,8 @@ class FreeEnd:
 
     def clipped(self, v: float, a: float) -> tuple:
         """Return (v, a) within the end's bounds (rounding at a bound taken back)."""
+        if self.pinned is not None:
+            return self.pinned
         a = min(max(a, -self.braking), 0.0)
         return min(max(v, 0.0), self.reach(a)), a
 
@@ -144,7 +151,13 @@ class ShapeProblem:
         the mouth of every port the curve neither leaves nor enters (``geometry.ports``)."""
         self.count = len(self.start.control_points)
         self.spans = self.count - DEGREE
-        self.limits_kept = limit_constraints(self.robot.limit_set, timing.margin) \
+        self.pinned = any(end is not None and end.pinned is not None for end in ends)
+        """Whether an end's motion is given (``FreeEnd.pinned``): then no curve of this
+        problem may be slowed down as a whole (its motion there would change), and its
+        rows keep ``PINNED_MARGIN`` more from every limit, which a solve's optimum, rounded
+        to the solver's tolerance, can otherwise exceed by as much."""
+        margin = timing.margin * (PINNED_MARGIN if self.pinned else 1.0)
+        self.limits_kept = limit_constraints(self.robot.limit_set, margin) \
             if constraints is None else list(constraints)
         """The limits the rows keep (``trajectory.constraints``), then the clearance."""
         self._joints = joint_bounds(self.limits_kept)
@@ -228,9 +241,9 @@ class ShapeProblem:
         """Return (lb, ub) of the solver's variables (points within ``lower``/``upper``)."""
         moving = int((~self.fixed).sum())
         ends_lb = np.array([x for k in self._free_ends
-                            for x in (0.0, -self.ends[k].braking, 0.0)])
+                            for x in (*self.ends[k].clipped(0.0, -self.ends[k].braking), 0.0)])
         ends_ub = np.array([x for k in self._free_ends
-                            for x in (self.ends[k].reach(0.0), 0.0, np.inf)])
+                            for x in (*self.ends[k].clipped(np.inf, 0.0), np.inf)])
         return (np.concatenate([np.tile(lower, moving), self.min_interval / scale, ends_lb]),
                 np.concatenate([np.tile(upper, moving), np.full(self.spans, np.inf), ends_ub]))
 
@@ -343,10 +356,11 @@ class ShapeProblem:
             row[tau_column], row[v_column], row[a_column] = 1.0, -by_v, -by_a
             extra_values.append(taus[n] - end.time(v, a))
             extra.append(row)
-            row = np.zeros(self.variables)
-            row[v_column], row[a_column] = -1.0, end.reach_slope(a)
-            extra_values.append(end.reach(a) - state[0])
-            extra.append(row)
+            if end.pinned is None:  # pinned: v stays, its rounding in state[0] aside
+                row = np.zeros(self.variables)
+                row[v_column], row[a_column] = -1.0, end.reach_slope(a)
+                extra_values.append(end.reach(a) - state[0])
+                extra.append(row)
             for m, index in enumerate((i1, i2)):
                 for sign, bound in ((1.0, lower), (-1.0, upper)):
                     extra_values += list(sign * (points[index] - bound))
