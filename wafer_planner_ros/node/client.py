@@ -100,7 +100,8 @@ planned in tens of milliseconds, and a controller given it after its moment woul
 up from where the stop should be by then (a lurch)."""
 DIVERT_LEAD = 1.0
 """s before the moment it leaves the move at that ``ask_planner`` sends a divert: the move
-from where the stop rests is planned too, in hundreds of milliseconds."""
+from where the stop rests is planned too, in hundreds of milliseconds, and the one curve
+from the moving state for up to half a second more."""
 
 
 def ask_planner(planner: str, request: dict, timeout: float,
