@@ -69,6 +69,12 @@ from wafer_planner_ros.service.settings import check, PARAMETERS, settings_from
 DELIVER_SLICE = 0.005
 """s of publishing (and recording) per executor turn: a burst's answers, each recorded
 before it goes out, do not hold up ``~/get_status`` behind them."""
+SWITCH_INTERVAL = 0.0002
+"""s a thread waits for the interpreter lock before the one holding it must let it go
+(``sys.setswitchinterval``; Python's default 5 ms). Planning holds it in Python stretches
+between its compiled calls: every time the stop thread needs it back (woken by a request,
+after publishing, ...) it waited up to this long. At 1 ms a stop took 10.3 ms end to end at
+p99 while a joint request was planned, at 0.2 ms 8.8 ms (60 stops each; doc/benchmark.md)."""
 STOP_WAIT = 0.2
 """s a stopping node waits for the worker's threads: idle ones end at once; a plan, a roadmap
 build or a station table being planned ends with the process (they write only whole files)."""
@@ -408,9 +414,9 @@ def _descriptor(spec) -> ParameterDescriptor:
 
 def main(args=None) -> int:
     """Run the node until interrupted (Ctrl-C or SIGTERM)."""
-    # The worker plans in Python: let the executor's threads in for the GIL every 1 ms
-    # (default 5 ms) so that status queries and answers are not held up by planning.
-    sys.setswitchinterval(0.001)
+    # The worker plans in Python: let the other threads in for the GIL every SWITCH_INTERVAL
+    # (default 5 ms) so that stops, status queries and answers are not held up by planning.
+    sys.setswitchinterval(SWITCH_INTERVAL)
     load_kernels()  # beside ROS's start and the roadmap's load
     return spin(lambda: WaferPlannerNode(own_process=True), 'wafer_planner', args)
 
