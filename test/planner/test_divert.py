@@ -1,5 +1,7 @@
 """A move diverted in motion: one curve from the moving state where one is found, else a stop."""
 
+import time
+
 from independent import check
 import numpy as np
 import pytest
@@ -48,9 +50,15 @@ def test_a_divert_is_one_curve_from_the_moving_state_where_one_is_found(
     assert diverted.cycle_time == curve.duration
 
 
-def test_a_divert_without_time_for_one_curve_stops_then_moves(planner, move, monkeypatch):
-    monkeypatch.setattr(stop_module, 'BLEND_SECONDS', 0.0)
-    diverted = planner.divert(move, 0.6 * move.duration, 'loadport2')
+@pytest.mark.parametrize('why', ['no time', 'the robot is there'])
+def test_a_divert_without_time_for_one_curve_stops_then_moves(planner, move, monkeypatch, why):
+    monkeypatch.setattr(stop_module, 'BLEND_SECONDS', 0.0 if why == 'no time' else 60.0)
+    # The robot passes the moment now: an answer found later would come too late.
+    leaves = time.monotonic() if why == 'the robot is there' else None
+    drafted = []
+    monkeypatch.setattr(stop_module, 'draft', lambda *a: drafted.append(a) or None)
+    diverted = planner.divert(move, 0.6 * move.duration, 'loadport2', leaves=leaves)
+    assert not drafted  # not sought at all
     assert diverted.metrics['divert'] == 'stop-then-move'
     assert isinstance(diverted.trajectory, Chained) and diverted.verification.ok
     assert diverted.cycle_time == pytest.approx(diverted.metrics['stop_time']

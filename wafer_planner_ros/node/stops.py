@@ -104,8 +104,9 @@ class Stops:
         Return (answer, stamp) of a plan request whose start is in motion (``Moving``).
 
         The move leaves the kept trajectory it names at its moment, planned by ``service``
-        as any request it answers (``PlanningService.divert``: within its budget); stamped
-        when it starts, as a stop is.
+        as any request it answers (``PlanningService.divert``: within its budget, the one
+        curve from the moving state sought only until shortly before the robot passes that
+        moment); stamped when it starts, as a stop is.
         Raise PlanningError: ``UNKNOWN_TRAJECTORY`` for a trajectory not kept,
         ``INVALID_REQUEST`` for another load than the trajectory's, else as
         ``Planner.divert`` does.
@@ -123,8 +124,11 @@ class Stops:
             raise PlanningError(ErrorCode.INVALID_REQUEST,
                                 f'{moving.trajectory!r} moves {result.load}: a move left in '
                                 f'motion keeps its load, not {request.load}')
+        starts = later(stamp, moving.at)
+        # The robot passes the moment at its stamp (the node's clock: the system's).
+        leaves = time.monotonic() + starts.sec + 1e-9 * starts.nanosec - time.time()
         return service.divert(result.trajectory, moving.at, request.goal, moving.trajectory,
-                              deadline, request.load), later(stamp, moving.at)
+                              deadline, request.load, leaves), starts
 
     def answer(self, number: int, request, received: float) -> None:
         """

@@ -148,18 +148,20 @@ class Planner:
 
     def divert(self, trajectory, at: float, goal, label: str = 'the move',
                load: Optional[str] = None, deadline: Optional[float] = None,
-               budget: Optional[float] = None) -> PlanResult:
+               budget: Optional[float] = None, leaves: Optional[float] = None) -> PlanResult:
         """
         Return the move from ``trajectory`` at ``at`` s to ``goal``, starting in motion.
 
-        For now its controlled stop then the move from rest to ``goal``, as one verified
-        trajectory (``stop.divert``). ``load``, ``deadline``, ``budget`` as for ``plan``.
+        One curve from the moving state where one is found, else the controlled stop then
+        the move from rest to ``goal``, as one verified trajectory (``stop.divert``).
+        ``load``, ``deadline``, ``budget`` as for ``plan``; ``leaves``: the
+        ``time.monotonic()`` instant the robot passes ``at`` (``stop.divert``).
         """
         if load is not None and load != self.load:
             return self.for_load(load).divert(trajectory, at, goal, label, None, deadline,
-                                              budget)
+                                              budget, leaves)
         return divert(self, trajectory, at, goal, label, deadline,
-                      None if budget is None else time.monotonic() + budget)
+                      None if budget is None else time.monotonic() + budget, leaves)
 
     def planned(self, start, goal, deadline: Optional[float] = None,
                 until: Optional[float] = None) -> PlanResult:

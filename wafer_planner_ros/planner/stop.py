@@ -40,6 +40,9 @@ BLENDED = 'blended-divert'
 """The method a diverted move's answer names when it is one curve from the moving state."""
 BLEND_SECONDS = 0.5
 """s: the longest a divert's one curve is optimised (less within a budget)."""
+LEAVE_MARGIN = 0.1
+"""s before the robot passes the moment a divert leaves its move at by which the search
+for one curve ends: left to verify, record and publish the answer."""
 FIRST_SPANS = np.array([0.125, 0.125, 0.25, 0.5])
 """The first of a divert's draft's even spans split so (``_blended``): the motion given at
 the start is followed closely at first, where the robot brakes or turns fastest."""
@@ -176,14 +179,17 @@ def _joined_lengths(cell, trajectory, at: float, moment: float, ahead: Prepared)
 
 
 def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
-           until=None) -> PlanResult:
+           until=None, leaves: Optional[float] = None) -> PlanResult:
     """
     Return the verified move from ``trajectory`` at ``at`` to ``goal`` (the module).
 
     The controlled stop, then the move from rest to ``goal``, verified as one trajectory;
     then, where that move is a curve of the method's (not through a port), one curve from
-    the moving robot's state (``continuing``) fitted to it and optimised within
-    ``BLEND_SECONDS`` (or the budget), verified: the faster verified one is the answer,
+    the moving robot's state (``continuing``) fitted to it and optimised for up to
+    ``BLEND_SECONDS`` (at most half-way to ``deadline``, and never past ``LEAVE_MARGIN``
+    before ``leaves``, the ``time.monotonic()`` instant the robot passes ``at``, if
+    known: an answer later than that is of no use), verified: the faster verified one is
+    the answer,
     its method saying which (``DIVERT``, ``BLENDED``). ``goal``: a station name or joint
     angles; ``deadline`` and ``until`` as for the planner's moves from rest. Raise
     PlanningError as ``stop`` and the move to the goal do, VERIFICATION_FAILED when
@@ -199,7 +205,8 @@ def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
     verified = time.perf_counter()
     curve, method, refused = chain, DIVERT, list(verification.problems)
     if isinstance(onward.trajectory, CubicBSpline):
-        blended, blend_refused = _blended(planner, chain, onward, (q, qd, qdd), deadline)
+        blended, blend_refused = _blended(planner, chain, onward, (q, qd, qdd), deadline,
+                                          leaves)
         refused += blend_refused
         if blended is not None and (not verification.ok or
                                     blended[0].duration < chain.duration):
@@ -225,13 +232,14 @@ def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
                               'total': 1e3 * (done - begun)})
 
 
-def _blended(planner, chain: Chained, onward: PlanResult, state: tuple,
-             deadline) -> tuple:
+def _blended(planner, chain: Chained, onward: PlanResult, state: tuple, deadline,
+             leaves: Optional[float]) -> tuple:
     """
     Return ((curve, verification) or None, what was refused) for ``divert``'s one curve.
 
     Drafts fitted to the stop-then-move ``chain`` (``continuing.draft``): with
-    ``ShapeSettings.min_spans`` even spans, then with the stop's time in ``STOP_SPANS``
+    ``ShapeSettings.min_spans`` even spans, the first split as ``FIRST_SPANS``, then
+    with the stop's time in ``STOP_SPANS``
     spans and the onward move's own spans after them; each optimised from the moving
     ``state`` (q, q', q'') to ``onward``'s goal (``CurveMethod.blend``, to beat the
     chain), the first verified returned.
@@ -242,6 +250,8 @@ def _blended(planner, chain: Chained, onward: PlanResult, state: tuple,
         return None, []
     # Its own time: the budget, if any, was the onward move's.
     until = time.monotonic() + BLEND_SECONDS
+    if leaves is not None:
+        until = min(until, leaves - LEAVE_MARGIN)
     halted, moving = chain.parts[0].duration, onward.trajectory
     spans = planner.method.shape.min_spans
     refused = []

@@ -23,7 +23,9 @@ once):
   the corridor curve, which takes milliseconds.
 
 ``divert`` answers a move left in motion (``Planner.divert``) by the same policy: the move
-from where its controlled stop rests is planned as a request for joint angles is.
+from where its controlled stop rests is planned as a request for joint angles is; with the
+whole-curve optimisation (within a budget, or a planner of that method) one curve from
+the moving state is then sought too, for up to ``stop.BLEND_SECONDS`` more.
 
 A budgeted answer names its budget (``metrics['budget']``). Its cycle time depends on how
 fast the machine was, so a replay cannot reproduce it: ``within_budget`` tells such answers
@@ -120,16 +122,18 @@ class PlanningService:
                       budget)
 
     def divert(self, trajectory, at: float, goal, label: str,
-               deadline: Optional[float] = None, load: str = LOADED) -> PlanResult:
+               deadline: Optional[float] = None, load: str = LOADED,
+               leaves: Optional[float] = None) -> PlanResult:
         """
         Return the move from ``trajectory`` in motion at ``at`` to ``goal`` (``Planner.divert``).
 
         Its move from where the stop rests is planned as a request for joint angles is: with
         the budget by the whole-curve optimisation, or without by ``planner`` (the module).
+        ``leaves``: the ``time.monotonic()`` instant the robot passes ``at``, if known.
         """
         planner, budget = self._budgeted(deadline)
-        return _named(planner.divert(trajectory, at, goal, label, load, deadline, budget),
-                      budget)
+        return _named(planner.divert(trajectory, at, goal, label, load, deadline, budget,
+                                     leaves), budget)
 
     def _budgeted(self, deadline: Optional[float]) -> tuple:
         """

@@ -30,6 +30,11 @@ proven collision-free; where a piece cannot be proven, clearance samples are add
 and wherever a scan of the curve finds a body nearer a wall than its samples keep, and the
 problem is solved again. Only proven curves are kept: the fastest is returned, or
 the start (if proven) when none beats it.
+
+A curve whose start is pinned to a moving robot's state (``ShapeProblem.pinned``: a divert,
+``continuing``) cannot be λ-scaled (slowed, it would leave that state): it is kept only as
+solved, where it meets every limit as the verification checks them, and solved again with
+the wafer's peaks sampled where it does not.
 """
 
 from dataclasses import dataclass
@@ -152,6 +157,7 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             logger.debug('shape round %d: T = %.4f s cannot beat %.4f s', rounds,
                          problem.total_of(points, intervals), give_up_above)
             return None
+        within = True  # every limit met as the verification checks them (pinned: below)
         with timed('optimise.limits'):
             limits = TimingProblem(points, cell.robot, timing)
             ratio, dense_span, dense_fraction = limits.dense_wafer_ratio(intervals)
@@ -175,7 +181,6 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             else:
                 scaled = limits.meet_limits(scaled)[0]
             curve = CubicBSpline.from_intervals(points, scaled)
-            within = within if problem.pinned else True
         with timed('optimise.proof'):
             proof = prove(curve, problem.model, problem.model.lipschitz)
         logger.debug('shape round %d: %s, %d iterations, T = %.4f s (x %.4f; wafer %.3f), '

@@ -7,6 +7,8 @@ curve then moves on there, along a given path at a speed v the optimiser chooses
 motion along that path takes a time tau >= time(v); the end's second and third control
 points follow from v and its first two spans (the curve's velocity and acceleration there
 are the path's at speed v), and v and tau are two more variables, tau in the objective.
+A pinned end (``FreeEnd.pinned``, a divert's start) has its v and a given: the curve
+starts in a moving robot's state whatever its spans.
 Rows g >= 0 (``solver_rows``): the
 velocity, acceleration (and jerk) control points, the wafer-centre acceleration at samples
 and the clearance of a body (or a port margin: the cell's ``motion_model``, with a
