@@ -73,8 +73,9 @@ SWITCH_INTERVAL = 0.0002
 """s a thread waits for the interpreter lock before the one holding it must let it go
 (``sys.setswitchinterval``; Python's default 5 ms). Planning holds it in Python stretches
 between its compiled calls: every time the stop thread needs it back (woken by a request,
-after publishing, ...) it waited up to this long. At 1 ms a stop took 10.3 ms end to end at
-p99 while a joint request was planned, at 0.2 ms 8.8 ms (60 stops each; doc/benchmark.md)."""
+after publishing, ...) it waits up to this long. A stop while a joint request was planned,
+end to end at p99: 10.3 ms at 1 ms, 8.8 ms at 0.2 ms (30 stops each); 10.8 ms over 240 at
+0.2 ms, within the spread of the runs at 1 ms (10.7-11.6 ms; doc/benchmark.md)."""
 STOP_WAIT = 0.2
 """s a stopping node waits for the worker's threads: idle ones end at once; a plan, a roadmap
 build or a station table being planned ends with the process (they write only whole files)."""

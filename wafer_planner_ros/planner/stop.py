@@ -39,7 +39,8 @@ DIVERT = 'stop-then-move'
 BLENDED = 'blended-divert'
 """The method a diverted move's answer names when it is one curve from the moving state."""
 BLEND_SECONDS = 0.5
-"""s: the longest a divert's one curve is optimised (less within a budget)."""
+"""s: the longest a divert's one curve is sought (less half-way to the request's deadline,
+or ``LEAVE_MARGIN`` before the robot passes the moment it leaves the move at)."""
 LEAVE_MARGIN = 0.1
 """s before the robot passes the moment a divert leaves its move at by which the search
 for one curve ends: left to verify, record and publish the answer."""
