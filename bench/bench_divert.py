@@ -23,12 +23,17 @@ are one curve and what those take against the stop then the move. Writes
 ``bench/results/divert.json`` (every row, the summary, the machine and commit); prints a
 table.
 
-Run: ``python bench/bench_divert.py [--moments 5] [--moves N]``.
+With ``--budget S`` each request is planned as the node plans it (``PlanningService`` with
+that budget, its deadline ``TIMEOUT`` s after it is asked; no station table), written to
+``bench/results/divert_budget.json``.
+
+Run: ``python bench/bench_divert.py [--moments 5] [--moves N] [--budget 0.12]``.
 """
 
 from pathlib import Path
 import sys
 import time
+from typing import Optional
 
 from bench_stop import _stats, arguments, written  # bench/: this folder is on the path
 
@@ -38,10 +43,14 @@ from wafer_planner_ros.errors import PlanningError
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.planner.stop import BLENDED
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.planning import PlanningService
 from wafer_planner_ros.trajectory.methods import WholeCurve
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'divert.json'
+BUDGETED = HERE / 'results' / 'divert_budget.json'
+TIMEOUT = 2.0
+"""s from a request to its deadline with ``--budget``: the node's ``planning.timeout``."""
 
 
 def elsewhere(cell, start: str, goal: str) -> str:
@@ -51,16 +60,23 @@ def elsewhere(cell, start: str, goal: str) -> str:
     return next(n for n in names[at + 1:] + names[:at] if n not in (start, goal))
 
 
-def divert_row(planner, move, at: float, station: str, label: str) -> dict:
-    """Return one divert's figures and those of the move from rest at the same point."""
+def divert_row(planner, move, at: float, station: str, label: str,
+               budget: Optional[float] = None) -> dict:
+    """
+    Return one divert's figures and those of the move from rest at the same point.
+
+    ``budget``: planned as the node plans them (``PlanningService`` with that budget, each
+    request's deadline ``TIMEOUT`` s after it is asked); None: unbudgeted.
+    """
     row = {'at': at, 'to': station}
     q = move.evaluate([at])[0]
+    service = PlanningService(planner, budget=budget)
     try:
         began = time.perf_counter()
-        diverted = planner.divert(move, at, station, label)
+        diverted = service.divert(move, at, station, label, _deadline(budget))
         ms = 1e3 * (time.perf_counter() - began)
         began = time.perf_counter()
-        from_rest = planner.plan(q, station)
+        from_rest = service.answer(q, station, _deadline(budget))
         rest_ms = 1e3 * (time.perf_counter() - began)
     except PlanningError as exc:
         row.update(error=f'{exc.code.name}: {exc.message}')
@@ -75,6 +91,11 @@ def divert_row(planner, move, at: float, station: str, label: str) -> dict:
                timings_ms=dict(diverted.timings_ms), from_rest_ms=rest_ms,
                verified=bool(diverted.verification.ok))
     return row
+
+
+def _deadline(budget: Optional[float]) -> Optional[float]:
+    """Return a request's deadline: ``TIMEOUT`` s from now within a budget, else None."""
+    return None if budget is None else time.monotonic() + TIMEOUT
 
 
 def summary_of(rows) -> dict:
@@ -105,7 +126,7 @@ def _line(name: str, s: dict) -> str:
 
 def main() -> int:
     """Run the benchmark."""
-    args = arguments(__doc__, 5)
+    args = arguments(__doc__, 5, budget=True)
     cell = Cell.from_yaml(default_cell_path())
     planner = Planner(cell, load_or_build(cell).roadmap, PlannerSettings(method=WholeCurve))
     warm = planner.plan('loadport2', 'loadlock2')  # warm-up: imports, caches, kernels
@@ -119,7 +140,7 @@ def main() -> int:
         for k in range(1, args.moments + 1):
             at = k * move.duration / (args.moments + 1)
             row = {'from': start, 'goal': goal, 'moment': k, 'duration_of_move': move.duration}
-            row.update(divert_row(planner, move, at, station, f'{name} ({k})'))
+            row.update(divert_row(planner, move, at, station, f'{name} ({k})', args.budget))
             mine.append(row)
         rows += mine
         summaries[f'{name} => {station}'] = summary_of(mine)
@@ -139,10 +160,12 @@ def main() -> int:
         print(f"one curve from the moving state in {overall['blended']} of "
               f"{overall['diverts']}: / the stop then the move median {gain['median']:.3f}, "
               f"max {gain['max']:.3f}")
-    written(RESULTS, 'diverted moves on the default cell (roadmap seed 0, whole-curve, '
-            'loaded) against the move from rest at the same point',
-            {'moments_per_move': args.moments, 'summary': overall, 'moves': summaries,
-             'rows': rows})
+    written(RESULTS if args.budget is None else BUDGETED,
+            'diverted moves on the default cell (roadmap seed 0, whole-curve, loaded) against '
+            'the move from rest at the same point'
+            + ('' if args.budget is None else f', {args.budget} s budget as the node'),
+            {'moments_per_move': args.moments, 'budget_s': args.budget, 'summary': overall,
+             'moves': summaries, 'rows': rows})
     return 0
 
 

@@ -411,11 +411,19 @@ def written(path: Path, benchmark: str, results: dict) -> None:
     print(f'written {path}', file=sys.stderr)
 
 
-def arguments(doc: str, moments: int):
-    """Return the command line of a benchmark of moves changed in motion (``--moments``)."""
+def arguments(doc: str, moments: int, budget: bool = False):
+    """
+    Return the command line of a benchmark of moves changed in motion (``--moments``).
+
+    ``budget``: it takes ``--budget S`` too (s of optimisation per request, as the node's).
+    """
     parser = argparse.ArgumentParser(description=doc.split('\n')[1])
     parser.add_argument('--moments', type=int, default=moments, help='moments per move')
     parser.add_argument('--moves', type=int, default=None, help='only the first N moves')
+    if budget:
+        parser.add_argument('--budget', type=float, default=None,
+                            help="s of optimisation per request, within the node's "
+                            'planning.timeout, as the node answers (default: unbudgeted)')
     return parser.parse_args()
 
 
