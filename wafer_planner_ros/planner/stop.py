@@ -225,7 +225,7 @@ def divert(planner, trajectory, at: float, goal, label: str, deadline=None,
                   {'diverted_at': float(at), 'divert': method,
                    'stop_time': halted.cycle_time, 'onward_time': onward.cycle_time,
                    'stop_then_move_time': chain.duration, 'refused': refused},
-                  len(getattr(curve, 'control_points', ())) or
+                  len(curve.control_points) if method == BLENDED else
                   onward.metrics.get('control_points', 0), method=method,
                   timings_ms={'stop': halted.timings_ms['total'], **timings,
                               'verify': 1e3 * (verified - checked),

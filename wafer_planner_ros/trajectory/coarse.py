@@ -42,13 +42,25 @@ def fitted_points(polygon: np.ndarray, spans: int) -> np.ndarray:
     u = np.linspace(0.0, 1.0, FIT_SAMPLES)
     targets = np.stack([np.interp(u, along, polygon[:, j]) for j in range(polygon.shape[1])],
                        axis=1)
-    count = spans + DEGREE
     knots = np.concatenate([np.zeros(DEGREE), np.linspace(0.0, 1.0, spans + 1),
                             np.ones(DEGREE)])
-    basis = basis_values(knots, u)                                       # (FIT_SAMPLES, count)
-    points = np.empty((count, polygon.shape[1]))
+    points = np.empty((spans + DEGREE, polygon.shape[1]))
     points[:DEGREE], points[-DEGREE:] = polygon[0], polygon[-1]
-    free = slice(DEGREE, count - DEGREE)
+    return fitted_between(knots, u, targets, points)
+
+
+def fitted_between(knots: np.ndarray, u: np.ndarray, targets: np.ndarray,
+                   points: np.ndarray) -> np.ndarray:
+    """
+    Return ``points`` with all but the first and last three fitted to ``targets`` at ``u``.
+
+    ``knots``: the curve's, on [0, 1]; ``u`` (k,) where ``targets`` (k, joints) lie; the
+    first and last three ``points`` stay as given (the curve's ends), the others minimise
+    the squared distance of the curve at ``u`` to ``targets``.
+    """
+    basis = _basis(knots, u)                                             # (k, points)
+    points = np.array(points, float)
+    free = slice(DEGREE, len(points) - DEGREE)
     fixed = basis[:, :DEGREE] @ points[:DEGREE] + basis[:, -DEGREE:] @ points[-DEGREE:]
     points[free] = np.linalg.lstsq(basis[:, free], targets - fixed, rcond=None)[0]
     return points
@@ -61,7 +73,7 @@ def coarse_start(polygon: np.ndarray, spans: int, robot, timing) -> CubicBSpline
     return CubicBSpline.from_intervals(points, intervals)
 
 
-def basis_values(knots: np.ndarray, u: np.ndarray) -> np.ndarray:
+def _basis(knots: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Return every cubic B-spline basis function (len(knots) - 4) at u in [0, 1] (Cox-de Boor)."""
     last = len(knots) - 1
     # Degree 0: the span holding u (the last one holds u = 1).

@@ -22,7 +22,7 @@ from typing import ClassVar, Optional
 import numpy as np
 
 from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE, knots_from_intervals
-from wafer_planner_ros.trajectory.coarse import basis_values
+from wafer_planner_ros.trajectory.coarse import fitted_between
 from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.shape_problem import FreeEnd
 
@@ -81,9 +81,5 @@ def draft(curve: Trajectory, velocity: np.ndarray, acceleration: np.ndarray,
     points[-DEGREE:] = q[1]
     knots = knots_from_intervals(intervals)
     u = np.linspace(0.0, 1.0, FIT_SAMPLES)
-    targets = curve.evaluate(u * curve.duration)
-    basis = basis_values(knots / knots[-1], u)
-    free = slice(DEGREE, count - DEGREE)
-    fixed = basis[:, :DEGREE] @ points[:DEGREE] + basis[:, -DEGREE:] @ points[-DEGREE:]
-    points[free] = np.linalg.lstsq(basis[:, free], targets - fixed, rcond=None)[0]
-    return Continuing(knots, points)
+    return Continuing(knots, fitted_between(knots / knots[-1], u,
+                                            curve.evaluate(u * curve.duration), points))
