@@ -284,17 +284,17 @@ def test_a_failed_rebuild_keeps_serving_the_last_good_roadmap(harness, tmp_path,
 def test_each_request_is_planned_on_the_roadmap_in_force_when_it_arrived(
         harness, monkeypatch):
     from rclpy.parameter import Parameter
-    from wafer_planner_ros.planner import Planner
+    from wafer_planner_ros.service.planning_process import ProcessService
     old = harness.status()['hash']
-    plan, release, planning = Planner.plan, threading.Event(), threading.Event()
+    plan, release, planning = ProcessService.answer, threading.Event(), threading.Event()
 
-    def held(planner, start, goal, **kwargs):  # keeps the first request planning
+    def held(service, start, goal, *args, **kwargs):  # keeps the first request planning
         if (start, goal) == ('loadport2', 'loadlock1') and not planning.is_set():
             planning.set()
             release.wait(60)
-        return plan(planner, start, goal, **kwargs)
+        return plan(service, start, goal, *args, **kwargs)
 
-    monkeypatch.setattr(Planner, 'plan', held)
+    monkeypatch.setattr(ProcessService, 'answer', held)
     node = harness.node
     try:
         harness.send_stations({'id': 'r-a', 'from': 'loadport2', 'to': 'loadlock1'})
@@ -364,7 +364,7 @@ def _once(original, exc):
 
 
 @pytest.mark.parametrize('where, to, code, says', [
-    ('Planner.plan', 'loadlock1', 'INTERNAL',
+    ('ProcessService.answer', 'loadlock1', 'INTERNAL',
      'INTERNAL: internal error while planning: RuntimeError: injected'),
     ('messages.trajectory', 'loadlock1', 'INTERNAL',
      'INTERNAL: internal error while answering: OverflowError: injected'),
@@ -380,8 +380,8 @@ def _once(original, exc):
 def test_a_failure_while_answering_is_one_internal_answer_and_the_node_serves_on(
         harness, monkeypatch, where, to, code, says):
     from wafer_planner_ros.node import markers, messages, planner_node
-    from wafer_planner_ros.planner import Planner
-    owners = {'Planner': Planner, 'messages': messages, 'markers': markers,
+    from wafer_planner_ros.service.planning_process import ProcessService
+    owners = {'ProcessService': ProcessService, 'messages': messages, 'markers': markers,
               'planner_node': planner_node, 'recording': harness.node._recording}
     owner, name = where.split('.')
     exc = OverflowError('injected') if 'trajectory' in where or 'status' in where else \
@@ -403,6 +403,36 @@ def test_a_failure_while_answering_is_one_internal_answer_and_the_node_serves_on
         wait_for(lambda: any(t.header.frame_id == request_id for t in harness.trajectories), 10)
     else:
         assert not any(t.header.frame_id == request_id for t in harness.trajectories)
+
+
+def test_a_planning_process_that_ends_fails_one_request_at_most_and_the_node_serves_on(
+        harness, default_cell):
+    from rclpy.parameter import Parameter
+    planning = harness.node._worker.planning
+    started = planning.started
+    joints = [s.configs[0].q for s in default_cell.stations.values()][:2]
+    for request_id in ('killed-idle', 'killed-planning'):
+        child = planning._child._process
+        if request_id == 'killed-idle':
+            child.kill()  # between requests: the next starts another, nothing fails
+            child.wait()
+        else:  # while it plans: that request is INTERNAL
+            threading.Timer(0.05, child.kill).start()
+            harness.node.set_parameters([Parameter('planning.optimise_budget', value=5.0)])
+        try:
+            harness.send_joints(request_id, *joints)
+            answer = harness.result(request_id)
+        finally:
+            harness.node.set_parameters([Parameter('planning.optimise_budget', value=0.12)])
+        code = values(answer)['code']
+        if request_id == 'killed-idle':
+            assert code == 'OK', answer.message
+        else:  # killed before it answered (then INTERNAL, saying so), or it answered first
+            assert code == 'OK' or 'the planning process ended' in answer.message, \
+                answer.message
+        harness.send_joints(f'{request_id}-next', *joints)
+        assert values(harness.result(f'{request_id}-next'))['code'] == 'OK'
+    assert planning.started == started + 2
 
 
 def test_parameters_are_checked(harness):

@@ -192,15 +192,15 @@ def test_a_station_pair_of_the_table_is_answered_at_once_while_joint_requests_pl
         table_node, default_cell, monkeypatch):
     from node_harness import values
     from rclpy.parameter import Parameter
-    from wafer_planner_ros.service.planning import PlanningService
-    answer = PlanningService.answer
+    from wafer_planner_ros.service.planning_process import ProcessService
+    answer = ProcessService.answer
 
     def slow(service, start, goal, deadline=None, load='loaded'):
         """Plan as the node does, each joint request taking half a second more."""
         if not isinstance(start, str):
             time.sleep(0.5)
         return answer(service, start, goal, deadline, load)
-    monkeypatch.setattr(PlanningService, 'answer', slow)
+    monkeypatch.setattr(ProcessService, 'answer', slow)
     table_node.node.set_parameters([Parameter('planning.optimise_budget', value=1.0)])
     try:
         joints = [f'busy{k}' for k in range(4)]
@@ -223,17 +223,17 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
         table_node, default_cell, monkeypatch):
     from node_harness import values
     from rclpy.parameter import Parameter
-    from wafer_planner_ros.service.planning import PlanningService
+    from wafer_planner_ros.service.planning_process import ProcessService
     timeout = 1.0
     pairs = _far_joint_requests(default_cell, 5)
-    answer = PlanningService.answer
+    answer = ProcessService.answer
 
     def stalled(service, start, goal, deadline=None, load='loaded'):
         """Plan as the node does, but the first request stalls (a stage overrunning)."""
         if np.array_equal(start, pairs[0][0]) and np.array_equal(goal, pairs[0][1]):
             time.sleep(3 * timeout)
         return answer(service, start, goal, deadline, load)
-    monkeypatch.setattr(PlanningService, 'answer', stalled)
+    monkeypatch.setattr(ProcessService, 'answer', stalled)
     table_node.node.set_parameters([Parameter('planning.timeout', value=timeout),
                                     Parameter('planning.max_queue', value=3)])
     try:

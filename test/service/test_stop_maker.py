@@ -41,7 +41,7 @@ def test_a_child_that_ends_fails_one_stop_and_the_next_starts_another(maker, sta
     find = maker.finder(move, default_cell.robot)
     find(0.5)
     # Ended while it seemed alive (its end not yet seen): the stop asked of it fails.
-    process = maker._process
+    process = maker._child._process
     process.kill()
     process.wait()
     alive = process.poll
@@ -52,6 +52,6 @@ def test_a_child_that_ends_fails_one_stop_and_the_next_starts_another(maker, sta
     assert find(0.6).trajectory.base is move  # the move handed to the new child again
     assert maker.started == 2
     # Seen ended before a stop is asked: another starts at once, nothing fails.
-    maker._process.kill()
-    maker._process.wait()
+    maker._child._process.kill()
+    maker._child._process.wait()
     assert find(0.7).trajectory.base is move and maker.started == 3

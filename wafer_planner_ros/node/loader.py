@@ -3,9 +3,11 @@ The node's roadmap loading: the cell, the roadmap, the kernels and the station t
 
 The loading thread loads the roadmap, waits for the compiled kernels
 (``startup.kernels_ready``: loaded since the process started, built ahead of time or from
-numba's cache, or compiled when missing) and loads the cached station table, and only then
-does the roadmap serve: the node is ready when it can answer, and until then the worker
-answers every request ``ROADMAP_NOT_READY`` at once, saying why (``Phase``). What the cached
+numba's cache, or compiled when missing), loads the cached station table and hands the
+roadmap to the planning process (``service.planning_process``, which plans what the table
+does not hold), and only then does the roadmap serve: the node is ready when it can answer,
+and until then the worker answers every request ``ROADMAP_NOT_READY`` at once, saying why
+(``Phase``). What the cached
 station tables lack is planned next, group by group, each handed to the service as it is
 planned (``serving.table_groups``: the station pairs, then the empty moves, then the moves
 through the ports, loaded and empty), and so are the pairs whose cached entries failed
@@ -35,12 +37,12 @@ from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.node.serving import build_station_tables, load_station_tables
 from wafer_planner_ros.node.serving import progress_reporter, Serving, table_to_plan
-from wafer_planner_ros.node.startup import (import_for_planning, kernels_ready,
-                                            since_process_start)
+from wafer_planner_ros.node.startup import kernels_ready, since_process_start
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
-from wafer_planner_ros.roadmap.graph import RoadmapSettings
+from wafer_planner_ros.roadmap.graph import import_for_searches, RoadmapSettings
 from wafer_planner_ros.service.planning import PlanningService
+from wafer_planner_ros.service.planning_process import PlanningProcess
 from wafer_planner_ros.service.settings import NodeSettings
 
 STARTED, QUEUED = 'started', 'queued'
@@ -67,16 +69,18 @@ class RoadmapLoader:
 
     def __init__(self, lock: threading.Condition, settings: Callable[[], NodeSettings],
                  recording: NodeRecording, send: Callable, logger, stamp: Callable,
-                 failed: Callable[[str], None]):
+                 failed: Callable[[str], None], planning: PlanningProcess):
         """
         Make the loading thread (``start`` starts it); nothing serves yet.
 
         ``lock`` is the worker's: it guards what follows too and is notified at every
         change; ``settings``, ``recording``, ``send``, ``stamp`` as the worker's, ``logger``
         one that never raises; ``failed(message)`` says a failed load in the worker's last
-        error (called with the lock held).
+        error (called with the lock held); ``planning``: the process that plans, handed
+        every roadmap before it serves.
         """
         self.lock = lock
+        self._planning = planning
         self._settings, self._recording, self._send = settings, recording, send
         self._logger, self._stamp, self._failed = logger, stamp, failed
         self.serving: Optional[Serving] = None
@@ -191,6 +195,12 @@ class RoadmapLoader:
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not loaded: {reason_of(exc)}')
         roadmap = cached.roadmap
+        key = self._planning.key()
+        try:  # ready means able to answer: the planning process holds the roadmap first
+            self._planning.hold(key, planner)
+        except RuntimeError as exc:  # the first request hands it over again
+            self._logger.error(f'the planning process did not take the roadmap: '
+                               f'{reason_of(exc)}')
         # Everything loaded so far lives as long as the node: keep it out of the garbage
         # collector's full passes, which otherwise pause every thread for tens of ms.
         gc.collect()
@@ -213,7 +223,7 @@ class RoadmapLoader:
                 self.pending_ns = None  # first: planning waits while it is set
                 self.previous = self.serving
                 serving = self.serving = Serving(PlanningService(planner, tables=tables),
-                                                 cached, loaded_ns)
+                                                 cached, loaded_ns, key)
                 if table_to_plan(planner, tables, settings):
                     self.enter(Phase.PLANNING_TABLE, locked=True)
                 self.loading_cell = None
@@ -226,7 +236,7 @@ class RoadmapLoader:
             f' (ready {time.monotonic() - started:.2f} s after loading began'
             f'{since_process_start()})')
         try:
-            import_for_planning()
+            import_for_searches()  # the station table's plans are made here
         except ImportError as exc:  # the first plan says it too
             self._logger.error(f'the planner cannot import: {reason_of(exc)}')
         try:

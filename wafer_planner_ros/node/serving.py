@@ -6,12 +6,13 @@ build), waits for the compiled kernels (``node.startup``), loads the cached stat
 (``load_station_tables``: one per limit set), which verify every entry in full and leave
 out those that fail, and hands it all over as a ``Serving``: a
 ``service.planning.PlanningService`` with the tables as its cache. From then on the node is
-ready. What the tables lack of what they are to hold (``table_groups``: the station pairs
-loaded; with ``planning.station_table_ports`` also empty, then the port pairs loaded and
-empty), or rejected, is planned then, group by group (``build_station_tables``;
-``table_to_plan`` says whether), the table stored and handed to the service as each pair
-is planned: each pair is answered from the table a second or two after the one before.
-How a request is answered is the service's to say.
+ready (the planning process, which plans what the tables do not hold, holds the roadmap too:
+``service.planning_process``). What the tables lack of what they are to hold
+(``table_groups``: the station pairs loaded; with ``planning.station_table_ports`` also
+empty, then the port pairs loaded and empty), or rejected, is planned then, group by group
+(``build_station_tables``; ``table_to_plan`` says whether), the table stored and handed to
+the service as each pair is planned: each pair is answered from the table a second or two
+after the one before. How a request is answered is the service's to say.
 """
 
 from dataclasses import dataclass
@@ -33,12 +34,14 @@ class Serving:
     A loaded roadmap, its planning service, and when it took over (``time.time_ns()``).
 
     The service's station table belongs to this roadmap: it is set there once loaded or
-    planned.
+    planned. ``key``: the roadmap's in the planning process
+    (``service.planning_process``), which plans what the table does not hold.
     """
 
     service: PlanningService
     cached: CachedRoadmap
     loaded_ns: int
+    key: int
 
     @property
     def planner(self) -> Planner:

@@ -11,8 +11,7 @@ upgrade of the package, another machine), compiles them (``service.warmup``), an
 by ``kernels_announced`` with progress. ``since_process_start`` measures readiness from
 the process's start, and ``core_warnings_to`` sends the core's warnings (Python
 ``logging``: the recorder's, the caches', the optimisers') to the node's log, where the
-rest of what it says goes. ``import_for_planning`` does the first plans' imports once the
-node is ready.
+rest of what it says goes.
 """
 
 import contextlib
@@ -168,19 +167,6 @@ def kernels_ready(logger, compiling: Callable[[], None] = lambda: None) -> None:
     ``kernels_announced`` then logs with progress.
     """
     _KERNELS.ready(logger, compiling)
-
-
-def import_for_planning() -> None:
-    """
-    Import what the first plans import when used (scipy's trees and graphs).
-
-    Imports slow enough to notice, which the planner leaves to its first use so that a tool
-    that never plans does not pay them: the node does them once it is ready, before the markers,
-    so that the first requests find them done (with numba loaded from its cache instead of
-    the build ahead of time, numba has imported much of scipy already).
-    """
-    import scipy.sparse.csgraph  # noqa: F401
-    import scipy.spatial  # noqa: F401
 
 
 def since_process_start() -> str:

@@ -1,7 +1,11 @@
 """
 The node's planning worker: the planning, table-answering and watchdog threads, and the loader.
 
-The planning thread plans one request at a time. Requests wait in a bounded backlog
+The planning thread plans one request at a time, in the planning process
+(``service.planning_process``: a child at a lower priority, so that planning never holds
+the interpreter lock or the cores a stop's answer needs; the thread waits on its pipe). A
+failure there (it ends, it fails) is that request's ``INTERNAL``; the next starts another.
+Requests wait in a bounded backlog
 (``planning.max_queue``; beyond it the answer is ``BUSY``). A station pair that the station
 table holds never waits behind planning: the answering thread gives it at once (from a
 queue of its own, as long). Every queued request is answered by ``planning.timeout``
@@ -36,6 +40,7 @@ from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
 from wafer_planner_ros.node.serving import Serving, table_counts
 from wafer_planner_ros.node.stops import Stops
+from wafer_planner_ros.service.planning_process import PlanningProcess
 from wafer_planner_ros.service.requests import Moving
 from wafer_planner_ros.service.settings import NodeSettings
 
@@ -81,8 +86,14 @@ class PlanningWorker:
         """Numbers of the queries being planned (not waiting)."""
         self.counts = {'served': 0, 'failed': 0}
         self.last_error = ''
+        self.planning = PlanningProcess()
+        """The child process planning what the station table does not hold."""
+        try:
+            self.planning.start()  # its imports beside the roadmap's load
+        except RuntimeError as exc:  # the roadmap's hand-over tries again
+            self._logger.error(f'the planning process did not start: {reason_of(exc)}')
         self._loader = RoadmapLoader(self.lock, settings, recording, send, self._logger, stamp,
-                                     self._load_failed)
+                                     self._load_failed, self.planning)
         self.stops = Stops(serve_stops, deliver, self.answer_error, self.answer_internal,
                            self._logger, stamp, lambda: self._settings().stops_ahead_share)
         """The published trajectories and the stop requests' own thread (``stops``)."""
@@ -217,12 +228,14 @@ class PlanningWorker:
         Wait up to ``timeout`` seconds in all for the threads to stop.
 
         A plan, a roadmap build or a station table being planned is not waited for beyond
-        that: the threads are daemons, ended with the process.
+        that: the threads are daemons, ended with the process; the planning process is
+        ended then.
         """
         deadline = time.monotonic() + timeout
         for thread in self._threads + [self._loader.thread]:
             thread.join(max(0.0, deadline - time.monotonic()))
         self.stops.join(max(0.0, deadline - time.monotonic()))
+        self.planning.close()
 
     # ----------------------------------------------------------------- planning
 
@@ -323,7 +336,8 @@ class PlanningWorker:
             settings = self._settings()
             with self.lock:
                 deadline = self._open.get(number, (None, received + settings.timeout))[1]
-            service = serving.service.using(settings.optimise_budget, settings.sample_period)
+            service = self.planning.service(serving.key, serving.service.using(
+                settings.optimise_budget, settings.sample_period))
             planner, roadmap = service.planner, serving.cached.roadmap
             joints = planner.cell.robot.joint_names
             angles = any(not isinstance(end, str) for end in (request.start, request.goal))

@@ -141,3 +141,16 @@ class Roadmap:
         """Return, per station, the set of components its nodes lie in."""
         return {name: {int(self.components[node]) for _, node in entries}
                 for name, entries in self.stations.items()}
+
+
+def import_for_searches() -> None:
+    """
+    Import what the roadmap's searches import when first used (scipy's trees and graphs).
+
+    Imports slow enough to notice, left to their first use so that a tool that never plans
+    does not pay them: the node's processes do them once ready, so that the first requests
+    find them done (with numba loaded from its cache instead of the build ahead of time,
+    numba has imported much of scipy already).
+    """
+    import scipy.sparse.csgraph  # noqa: F401
+    import scipy.spatial  # noqa: F401

@@ -104,20 +104,24 @@ class PlanningService:
         return PlanningService(planner, budget=budget, tables=self.tables)
 
     def answer(self, start, goal, deadline: Optional[float] = None,
-               load: str = LOADED) -> PlanResult:
+               load: str = LOADED, transfer: Optional[PlanResult] = None) -> PlanResult:
         """
         Return the verified answer from ``start`` to ``goal`` (stations or joint angles).
 
         ``deadline``: a ``time.monotonic()`` instant after which planning gives up with
         TIMEOUT. ``load``: the limit set (``Planner.plan``), which picks the station table.
-        Raises PlanningError with the code of the first reason it cannot answer.
+        ``transfer``: the table's move between the stations of a port move
+        (``lent_transfer``), when a service without the tables plans it. Raises
+        PlanningError with the code of the first reason it cannot answer.
         """
         table = self._holding(start, goal, load)
         if table is not None:
             return table.answer(self.planner, start, goal)
         planner, budget = self._budgeted(deadline)
         if budget is not None:
-            self._lend_transfer(start, goal, load)
+            transfer = transfer or self.lent_transfer(start, goal, load)
+            if transfer is not None:
+                whole_curve(self.planner).for_load(load).keep(transfer)
         return _named(planner.plan(start, goal, deadline=deadline, budget=budget, load=load),
                       budget)
 
@@ -151,23 +155,24 @@ class PlanningService:
             return _with_method(self.planner, KnotTiming), None
         return whole_curve(self.planner), budget
 
-    def _lend_transfer(self, start, goal, load: str) -> None:
+    def lent_transfer(self, start, goal, load: str = LOADED) -> Optional[PlanResult]:
         """
-        Give the whole-curve planner the table's move between the stations of a port move.
+        Return the table's move between the stations of a port move, or None.
 
         A move from inside a port to inside another is planned as its ways through the
         ports and a transfer between the port mouths, the stations' retracted poses: when
         the table of ``load`` holds that station pair, its verified answer is that transfer
-        (``Planner.keep``), where the budget alone would make a slower one.
+        (``Planner.keep``: ``answer`` lends it to the whole-curve planner), where the budget
+        alone would make a slower one.
         """
         if not (isinstance(start, str) and isinstance(goal, str)) or not (
                 start.endswith(INSIDE) or goal.endswith(INSIDE)):
-            return
+            return None
         pair = tuple(station_name(name) for name in (start, goal))
         table = self._holding(*pair, load)
-        if table is not None:
-            planner = whole_curve(self.planner).for_load(load)
-            planner.keep(table.answer(planner, *pair))
+        if table is None:
+            return None
+        return table.answer(whole_curve(self.planner).for_load(load), *pair)
 
 
 def _named(result: PlanResult, budget: Optional[float]) -> PlanResult:

@@ -1,0 +1,82 @@
+"""Requests planned in a child process: the very answers planned in process, the table's here."""
+
+from independent import check
+import numpy as np
+import pytest
+from wafer_planner_ros.errors import ErrorCode, PlanningError
+from wafer_planner_ros.planner import Planner, PlannerSettings
+from wafer_planner_ros.report import plan_json
+from wafer_planner_ros.service.planning import PlanningService
+from wafer_planner_ros.service.planning_process import PlanningProcess
+from wafer_planner_ros.service.table import build_table
+from wafer_planner_ros.trajectory.methods import WholeCurve
+
+
+@pytest.fixture
+def process():
+    made = PlanningProcess()
+    yield made
+    made.close()
+
+
+@pytest.fixture(scope='module')
+def planner(default_cell, default_roadmap):
+    return Planner(default_cell, default_roadmap, PlannerSettings(method=WholeCurve))
+
+
+def test_a_request_planned_in_the_child_is_the_one_planned_in_process(process, planner,
+                                                                      default_cell):
+    local = PlanningService(planner)
+    service = process.service(process.key(), local)
+    for start, goal in (('loadport1', 'loadlock2'), ((-1.2, 2.4, 1.3), (1.0, -2.0, -1.0))):
+        there, here = service.answer(start, goal), local.answer(start, goal)
+        assert there.verification.ok and there.branches == here.branches
+        assert there.cycle_time == pytest.approx(here.cycle_time, rel=1e-9)
+        assert np.array_equal(there.positions, here.positions)
+        check(default_cell, plan_json(there, {}, default_cell.robot.joint_names),
+              there.start_q, there.goal_q)
+    # What the child's planner raises is raised here, with its code.
+    with pytest.raises(PlanningError) as raised:
+        service.answer('loadport1', 'nowhere')
+    assert raised.value.code is ErrorCode.UNKNOWN_STATION and 'nowhere' in raised.value.message
+    assert process.started == 1
+
+
+def test_a_divert_is_planned_in_the_child_from_the_moving_state(process, planner,
+                                                                station_move):
+    move = station_move.trajectory
+    at = 0.5 * move.duration
+    diverted = process.service(process.key(), PlanningService(planner)).divert(
+        move, at, 'loadport2', 'the move')
+    assert diverted.verification.ok and diverted.metrics['divert'] in (
+        'blended-divert', 'stop-then-move')
+    curve = diverted.trajectory
+    (q0, v0, a0), (q, qd, qdd) = (
+        [x[0] for x in trajectory.evaluate_orders([t], range(3))]
+        for trajectory, t in ((curve, 0.0), (move, at)))
+    assert np.array_equal(q0, q)
+    assert np.abs(v0 - qd).max() <= 1e-9 and np.abs(a0 - qdd).max() <= 1e-9
+
+
+def test_a_pair_the_table_holds_is_answered_here_without_a_child(process, planner):
+    table = build_table(planner, pairs=[('loadport1', 'loadlock2')])
+    service = process.service(process.key(), PlanningService(planner, table=table))
+    answer = service.answer('loadport1', 'loadlock2')
+    assert answer.verification.ok and service.holds('loadport1', 'loadlock2')
+    assert process.started == 0  # no plan: no child
+
+
+def test_a_child_that_ends_fails_one_request_and_the_next_hands_the_roadmap_over_again(
+        process, planner):
+    key = process.key()
+    process.hold(key, planner)
+    service = process.service(key, PlanningService(planner))
+    child = process._child._process
+    child.kill()
+    child.wait()
+    alive, child.poll = child.poll, lambda: None  # ended, its end not seen yet
+    with pytest.raises(RuntimeError, match='the planning process ended'):
+        service.answer('loadport1', 'loadlock2')
+    child.poll = alive
+    assert service.answer('loadport1', 'loadlock2').verification.ok
+    assert process.started == 2
