@@ -22,7 +22,8 @@ Benchmark: the planning node as a process, asked over DDS on loopback.
 3. A burst of 200 station requests from 4 publishers at once, recording on: every result
    received, none lost or duplicated, how many were BUSY, ``~/get_status`` round trips
    throughout, and every request and result in the recording.
-4. The node's resident memory.
+4. The node's resident memory, and its child processes' (the planning process, the stop
+   maker if started).
 Prints a table; writes ``bench/results/node.json``. Usage: ``make bench`` or
 ``python bench/bench_node.py [--joints N]``.
 """
@@ -447,6 +448,26 @@ def _recorded(bag: str) -> dict:
 
 
 def _memory(pid: int) -> dict:
+    """Return the node's VmRSS and VmHWM (MB), and its child processes' by module."""
+    fields = _vm(pid)
+    children = {}
+    for proc in Path('/proc').iterdir():
+        try:
+            if not proc.name.isdigit() or \
+                    int((proc / 'stat').read_text().rsplit(')', 1)[1].split()[1]) != pid:
+                continue
+            command = (proc / 'cmdline').read_bytes().split(b'\0')
+            module = command[command.index(b'-m') + 1].decode().rsplit('.', 1)[-1]
+            children[module] = _vm(int(proc.name))
+        except (OSError, ValueError, IndexError):
+            continue  # ended meanwhile, or not one of the package's
+    fields['children'] = children
+    fields['VmRSS_with_children'] = round(
+        fields['VmRSS'] + sum(child['VmRSS'] for child in children.values()), 1)
+    return fields
+
+
+def _vm(pid: int) -> dict:
     fields = {}
     for line in Path(f'/proc/{pid}/status').read_text().splitlines():
         key, _, value = line.partition(':')

@@ -11,6 +11,12 @@ compiled kernel's call gives way (``kernels.Kernel``): planning, the roadmap's b
 the verification of stops made ahead call kernels every few microseconds to
 milliseconds. Nothing else changes: a paused computation goes on where it was.
 
+Child processes doing such work (``pausing``: the node's planning process) are stopped
+while an answer is urgent (``SIGSTOP``, continued by ``SIGCONT`` as the last urgent answer
+is made): a child left running keeps a core of a two-core machine from the answer's
+threads and the middleware's, where the kernels' pauses keep only the lock from them. A
+stopped child goes on where it was, a few milliseconds later.
+
 The operating system is asked the same (``background``): the threads whose work nobody
 waits for (the roadmap's load, the stops made ahead) run at a lower scheduling priority,
 so that on a busy machine an urgent thread waking up gets a core. Planning does not: a
@@ -21,7 +27,9 @@ burst of requests then found the queue full.
 from contextlib import contextmanager
 import gc
 import os
+import signal
 import threading
+import weakref
 
 LONGEST = 0.02
 """s one ``give_way`` pauses at most."""
@@ -33,6 +41,21 @@ _urgent = {}
 _changed = threading.Condition()
 _collecting = [True]
 """Whether the garbage collector was on when urgent work began."""
+_pausing = weakref.WeakSet()
+"""The child processes stopped while any work is urgent (``pausing``)."""
+_paused = []
+"""The processes stopped by the urgent work under way (continued when it ends)."""
+
+
+def pausing(child) -> None:
+    """
+    Stop ``child`` while any work is urgent, from now on for as long as it lives.
+
+    ``child``: an object whose ``running()`` returns its running ``subprocess.Popen``, or
+    None while none runs.
+    """
+    with _changed:
+        _pausing.add(child)
 
 
 @contextmanager
@@ -48,6 +71,8 @@ def urgent():
         if not _urgent:
             _collecting[0] = gc.isenabled()
             gc.disable()
+            _signal(list(filter(None, (child.running() for child in _pausing))),
+                    signal.SIGSTOP, _paused)
         _urgent[ident] = _urgent.get(ident, 0) + 1
     try:
         yield
@@ -56,9 +81,22 @@ def urgent():
             _urgent[ident] -= 1
             if not _urgent[ident]:
                 del _urgent[ident]
-                if not _urgent and _collecting[0]:
-                    gc.enable()
+                if not _urgent:
+                    if _collecting[0]:
+                        gc.enable()
+                    paused, _paused[:] = list(_paused), []
+                    _signal(paused, signal.SIGCONT, [])
                 _changed.notify_all()
+
+
+def _signal(processes, number: int, sent: list) -> None:
+    """Send signal ``number`` to each running process of ``processes``; list them in ``sent``."""
+    for process in processes:
+        try:
+            process.send_signal(number)  # nothing once it has ended (and been waited for)
+            sent.append(process)
+        except OSError:
+            pass  # ended meanwhile
 
 
 def urgent_now() -> bool:

@@ -92,3 +92,37 @@ def test_urgency_lasts_until_the_outermost_urgent_context_ends():
         assert not gc.isenabled()
     finally:
         gc.enable()
+
+
+def test_a_child_process_doing_such_work_is_stopped_while_an_answer_is_urgent():
+    import subprocess
+    import sys
+
+    class Child:
+        def __init__(self):
+            self.process = subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+
+        def running(self):
+            return self.process
+
+    def state(process) -> str:
+        with open(f'/proc/{process.pid}/stat') as stat:
+            return stat.read().rsplit(')', 1)[1].split()[0]
+
+    child, ended = Child(), Child()
+    ended.process.kill()
+    ended.process.wait()  # ended before: nothing is sent to it, nothing fails
+    giving_way.pausing(child)
+    giving_way.pausing(ended)
+    try:
+        assert state(child.process) in 'RS'
+        with urgent():
+            with urgent():  # nested: the outermost continues it
+                time.sleep(0.05)
+                assert state(child.process) == 'T'  # stopped
+            assert state(child.process) == 'T'
+        time.sleep(0.05)
+        assert state(child.process) in 'RS'  # going on
+    finally:
+        child.process.kill()
+        child.process.wait()

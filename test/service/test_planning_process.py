@@ -1,5 +1,7 @@
 """Requests planned in a child process: the very answers planned in process, the table's here."""
 
+import logging
+
 from independent import check
 import numpy as np
 import pytest
@@ -80,3 +82,30 @@ def test_a_child_that_ends_fails_one_request_and_the_next_hands_the_roadmap_over
     child.poll = alive
     assert service.answer('loadport1', 'loadlock2').verification.ok
     assert process.started == 2
+
+
+def test_what_the_child_s_planner_logs_is_logged_here(process, planner, monkeypatch, caplog):
+    from wafer_planner_ros.service import planning_process
+    said = logging.getLogger('wafer_planner_ros.planner.candidates')
+
+    def answer(service, start, goal, *arguments):
+        said.warning('a curve failed; trying the next')
+        raise PlanningError(ErrorCode.NO_PATH, 'none')
+    # The child's side, run here: what is logged while it plans goes back with the answer.
+    child = planning_process._Planning()
+    try:
+        monkeypatch.setattr(PlanningService, 'answer', answer)
+        child.reply(('hold', 0, planner.cell, planner.roadmap, planner.settings))
+        reply = child.reply(('plan', 0, None, planner.settings.sample_period, 'answer',
+                             'loadport1', 'loadlock2', None, 'loaded', None))
+    finally:
+        logging.getLogger().removeHandler(child.said)
+    assert reply[:3] == ('planning', 'NO_PATH', 'none')
+    assert reply[3] == [(said.name, logging.WARNING, 'a curve failed; trying the next')]
+    # The parent's: logged under the same logger, then the error raised.
+    monkeypatch.setattr(process._child, 'exchange', lambda messages, wait=None: [reply])
+    caplog.clear()
+    with caplog.at_level(logging.WARNING), pytest.raises(PlanningError):
+        process.service(process.key(), PlanningService(planner)).answer('loadport1', 'x')
+    assert [(r.name, r.getMessage()) for r in caplog.records] == [
+        (said.name, 'a curve failed; trying the next')]

@@ -1,9 +1,9 @@
 """
 The node's planning worker: the planning, table-answering and watchdog threads, and the loader.
 
-The planning thread plans one request at a time, in the planning process
-(``service.planning_process``: a child at a lower priority, so that planning never holds
-the interpreter lock or the cores a stop's answer needs; the thread waits on its pipe). A
+The planning thread takes one request at a time and has it planned in the planning process
+(``service.planning_process``: a child at a lower priority, so that planning never holds the
+interpreter lock or the cores a stop's answer needs; the thread waits on its pipe). A
 failure there (it ends, it fails) is that request's ``INTERNAL``; the next starts another.
 Requests wait in a bounded backlog
 (``planning.max_queue``; beyond it the answer is ``BUSY``). A station pair that the station

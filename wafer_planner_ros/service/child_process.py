@@ -85,6 +85,10 @@ class ChildProcess:
             why = 'its pipe closed' if isinstance(exc, EOFError) else str(exc) or repr(exc)
             raise RuntimeError(f'{self.name} ended (exit code {code}): {why}') from None
 
+    def running(self) -> Optional[subprocess.Popen]:
+        """Return the child's process while one is started (it may have ended since), else None."""
+        return self._process
+
     def close(self) -> None:
         """End the child (it ends by itself once its pipe closes); killed if one is awaited."""
         if self._lock.acquire(timeout=1.0):

@@ -6,8 +6,9 @@ holds the interpreter lock in stretches a stop request cannot cut short, and tak
 the stop's answer needs: measured with 240 stops while joint requests were planned in
 process, the stop's latency was 10.78 ms at p99 against 6.09 idle. ``PlanningProcess``
 plans them in a child (``python -m wafer_planner_ros.service.planning_process``, a
-``child_process.ChildProcess`` ``NICE`` steps below the node's priority), over a pair of
-pipes: the thread that waits for the answer waits on a pipe, the lock free.
+``child_process.ChildProcess`` ``NICE`` steps below the node's priority, and stopped while
+a stop is answered: ``giving_way.pausing``), over a pair of pipes: the thread that waits
+for the answer waits on a pipe, the lock free.
 
 ``PlanningProcess.service(key, local)`` returns a ``ProcessService``: the service
 ``local`` (a ``service.planning.PlanningService``: the planner, its budget, its station
@@ -19,16 +20,19 @@ caller's ``key`` (a roadmap and its cell, never two under one key): ``hold`` han
 ahead (the node, before a roadmap serves), else it is handed over with the first request
 that needs it, and again to a child started after one ended. The child answers what its
 planner answers: proven and verified there (``Planner.plan``, ``Planner.divert``), its
-``PlanningError`` raised here as it was raised there. A child that fails or ends fails
+``PlanningError`` raised here as it was raised there, and what its planner logs (warnings
+and errors) logged here, as if said here. A child that fails or ends fails
 the one request under way (RuntimeError); the next starts another. One that plans on
 ``STALLED_AFTER`` s past a request's deadline is ended.
 """
 
 import itertools
+import logging
 import sys
 import time
 from typing import Optional
 
+from wafer_planner_ros import giving_way
 from wafer_planner_ros.cell.limits import LOADED
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlanResult
@@ -56,6 +60,7 @@ class PlanningProcess:
         """Start nothing yet: the child starts at the first hand-over or request."""
         self._child = ChildProcess('wafer_planner_ros.service.planning_process',
                                    'the planning process', HOLD_WAIT)
+        giving_way.pausing(self._child)  # stopped while a stop is answered
         self._keys = itertools.count()
 
     @property
@@ -109,6 +114,9 @@ class PlanningProcess:
             if reply[0] != 'held':
                 raise RuntimeError(f'the planning process failed: {reply[1]}')
         reply = replies[-1]
+        if reply[0] in ('planned', 'planning'):
+            for name, level, message in reply[-1]:  # what the child's planner said, said here
+                logging.getLogger(name).log(level, '%s', message)
         if reply[0] == 'planned':
             return reply[1]
         if reply[0] == 'planning':
@@ -169,6 +177,8 @@ class _Planning:
         self.planners = {}
         """key -> the planner of a roadmap handed over, the latest ``ROADMAPS``."""
         self.loaded = False
+        self.said = _Said()
+        logging.getLogger().addHandler(self.said)
 
     def reply(self, message: tuple) -> tuple:
         """Hold a roadmap (``('hold', key, ...)``) or plan a request on one (``'plan'``)."""
@@ -185,12 +195,24 @@ class _Planning:
             return ('held', key)
         _, key, budget, sample_period, kind, *arguments = message
         service = PlanningService(self.planners[key]).using(budget, sample_period)
+        self.said.records = []
         try:
-            if kind == 'answer':
-                return ('planned', service.answer(*arguments))
-            return ('planned', service.divert(*arguments))
+            plan = service.answer if kind == 'answer' else service.divert
+            return ('planned', plan(*arguments), self.said.records)
         except PlanningError as exc:
-            return ('planning', exc.code.name, exc.message)
+            return ('planning', exc.code.name, exc.message, self.said.records)
+
+
+class _Said(logging.Handler):
+    """The child's warnings and errors while it plans, handed back with the answer."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.records = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Keep (logger name, level, message) of ``record``."""
+        self.records.append((record.name, record.levelno, record.getMessage()))
 
 
 def main(argv=None) -> int:
