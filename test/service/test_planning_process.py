@@ -87,6 +87,9 @@ def test_a_child_that_ends_fails_one_request_and_the_next_hands_the_roadmap_over
 def test_what_the_child_s_planner_logs_is_logged_here(process, planner, monkeypatch, caplog):
     from wafer_planner_ros.service import planning_process
     said = logging.getLogger('wafer_planner_ros.planner.candidates')
+    # As in a process of its own (a node in this one sends them to its log instead).
+    monkeypatch.setattr(logging.getLogger('wafer_planner_ros'), 'propagate', True)
+    monkeypatch.setattr(said, 'disabled', False)  # as a linter's logging set-up leaves it
 
     def answer(service, start, goal, *arguments):
         said.warning('a curve failed; trying the next')
@@ -99,7 +102,7 @@ def test_what_the_child_s_planner_logs_is_logged_here(process, planner, monkeypa
         reply = child.reply(('plan', 0, None, planner.settings.sample_period, 'answer',
                              'loadport1', 'loadlock2', None, 'loaded', None))
     finally:
-        logging.getLogger().removeHandler(child.said)
+        logging.getLogger('wafer_planner_ros').removeHandler(child.said)
     assert reply[:3] == ('planning', 'NO_PATH', 'none')
     assert reply[3] == [(said.name, logging.WARNING, 'a curve failed; trying the next')]
     # The parent's: logged under the same logger, then the error raised.

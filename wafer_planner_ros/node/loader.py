@@ -3,12 +3,12 @@ The node's roadmap loading: the cell, the roadmap, the kernels and the station t
 
 The loading thread loads the roadmap, waits for the compiled kernels
 (``startup.kernels_ready``: loaded since the process started, built ahead of time or from
-numba's cache, or compiled when missing), loads the cached station table and hands the
-roadmap to the planning process (``service.planning_process``, which plans what the table
-does not hold), and only then does the roadmap serve: the node is ready when it can answer,
-and until then the worker answers every request ``ROADMAP_NOT_READY`` at once, saying why
-(``Phase``). What the cached
-station tables lack is planned next, group by group, each handed to the service as it is
+numba's cache, or compiled when missing) and loads the cached station table, and only then
+does the roadmap serve (handed meanwhile to the planning process,
+``service.planning_process``, which plans what the table does not hold; a request that needs
+it waits for that): the node is ready when it can answer, and until then the worker answers
+every request ``ROADMAP_NOT_READY`` at once, saying why (``Phase``). What the cached station
+tables lack is planned next, group by group, each handed to the service as it is
 planned (``serving.table_groups``: the station pairs, then the empty moves, then the moves
 through the ports, loaded and empty), and so are the pairs whose cached entries failed
 verification (``busy_with: station_table``), pairs the tables do not hold yet being planned
@@ -195,12 +195,12 @@ class RoadmapLoader:
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not loaded: {reason_of(exc)}')
         roadmap = cached.roadmap
+        # The planning process takes the roadmap meanwhile (a request waits for that: a few
+        # tenths of a second once the process has started; the first request that needs it
+        # hands it over again if this fails).
         key = self._planning.key()
-        try:  # ready means able to answer: the planning process holds the roadmap first
-            self._planning.hold(key, planner)
-        except RuntimeError as exc:  # the first request hands it over again
-            self._logger.error(f'the planning process did not take the roadmap: '
-                               f'{reason_of(exc)}')
+        self._planning.hold_ahead(key, planner, lambda exc: self._logger.error(
+            f'the planning process did not take the roadmap: {reason_of(exc)}'))
         # Everything loaded so far lives as long as the node: keep it out of the garbage
         # collector's full passes, which otherwise pause every thread for tens of ms.
         gc.collect()

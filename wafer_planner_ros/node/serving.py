@@ -6,8 +6,8 @@ build), waits for the compiled kernels (``node.startup``), loads the cached stat
 (``load_station_tables``: one per limit set), which verify every entry in full and leave
 out those that fail, and hands it all over as a ``Serving``: a
 ``service.planning.PlanningService`` with the tables as its cache. From then on the node is
-ready (the planning process, which plans what the tables do not hold, holds the roadmap too:
-``service.planning_process``). What the tables lack of what they are to hold
+ready (the planning process, which plans what the tables do not hold, takes the roadmap
+meanwhile: ``service.planning_process``). What the tables lack of what they are to hold
 (``table_groups``: the station pairs loaded; with ``planning.station_table_ports`` also
 empty, then the port pairs loaded and empty), or rejected, is planned then, group by group
 (``build_station_tables``; ``table_to_plan`` says whether), the table stored and handed to

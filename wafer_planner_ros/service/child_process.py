@@ -45,24 +45,17 @@ class ChildProcess:
         """Children started so far."""
 
     def exchange(self, messages: Callable[[set], Sequence[tuple]],
-                 wait: Optional[float] = None,
-                 turn: Optional[float] = None) -> Optional[List[tuple]]:
+                 wait: Optional[float] = None) -> List[tuple]:
         """
         Send ``messages(held)`` (started first if need be) and return their replies in order.
 
         ``messages`` is called once the child runs, with the keys it holds (it adds those
         its messages hand over). ``wait``: seconds for all the replies (default: the
-        child's); ``turn``: seconds to wait at most while another exchange is under way
-        (None: as long as it takes), after which nothing is sent and None returned. Raises
-        RuntimeError once the child fails, ends or does not reply in time (it is ended
-        then: the next exchange starts another).
+        child's). Raises RuntimeError once the child fails, ends or does not reply in time
+        (it is ended then: the next exchange starts another).
         """
-        if not self._lock.acquire(timeout=-1 if turn is None else turn):
-            return None
-        try:
+        with self._lock:
             return self._exchange(messages, self.wait if wait is None else wait)
-        finally:
-            self._lock.release()
 
     def _exchange(self, messages: Callable[[set], Sequence[tuple]], wait: float) -> List[tuple]:
         try:
@@ -89,11 +82,16 @@ class ChildProcess:
         """Return the child's process while one is started (it may have ended since), else None."""
         return self._process
 
-    def close(self) -> None:
-        """End the child (it ends by itself once its pipe closes); killed if one is awaited."""
-        if self._lock.acquire(timeout=1.0):
+    def close(self, wait: float = 1.0, grace: float = 1.0) -> None:
+        """
+        End the child (it ends by itself once its pipe closes).
+
+        Killed if a reply is still awaited after ``wait`` s (the waiting caller gets
+        RuntimeError), or when it has not ended ``grace`` s after its pipe closed.
+        """
+        if self._lock.acquire(timeout=wait):
             try:
-                self._end()
+                self._end(grace)
             finally:
                 self._lock.release()
             return
@@ -117,14 +115,14 @@ class ChildProcess:
         self.held = set()
         self.started += 1
 
-    def _end(self) -> None:
+    def _end(self, grace: float = 1.0) -> None:
         if self._pipes is not None:
             for pipe in self._pipes:
                 pipe.close()
             self._pipes = None
         if self._process is not None:
             try:
-                self._process.wait(timeout=1.0)
+                self._process.wait(timeout=grace)
             except subprocess.TimeoutExpired:
                 self._process.kill()
                 self._process.wait()

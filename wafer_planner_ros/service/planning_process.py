@@ -2,35 +2,35 @@
 Requests planned in a process of their own, so that planning never holds up a stop.
 
 Planning a request is up to half a second of Python and numpy. In the node's own process it
-holds the interpreter lock in stretches a stop request cannot cut short, and takes the cores
-the stop's answer needs: measured with 240 stops while joint requests were planned in
-process, the stop's latency was 10.78 ms at p99 against 6.09 idle. ``PlanningProcess``
-plans them in a child (``python -m wafer_planner_ros.service.planning_process``, a
+holds the interpreter lock in stretches a stop request cannot cut short, and a crash in it
+(a compiled kernel's, memory) would end the node. ``PlanningProcess`` plans them in a
+child (``python -m wafer_planner_ros.service.planning_process``, a
 ``child_process.ChildProcess`` ``NICE`` steps below the node's priority, and stopped while
 a stop is answered: ``giving_way.pausing``), over a pair of pipes: the thread that waits
-for the answer waits on a pipe, the lock free.
+for the answer waits on a pipe, the lock free, and a stop's answer has both cores.
 
-``PlanningProcess.service(key, local)`` returns a ``ProcessService``: the service
-``local`` (a ``service.planning.PlanningService``: the planner, its budget, its station
-tables) as this process answers with it. A pair the station table holds is answered here
-at once, from the table; anything else (``answer``, ``divert``) is planned in the child by
-the same policy, the table's move lent for a port move (``PlanningService.lent_transfer``).
-The child holds the planners of the two latest roadmaps it was handed, each under the
-caller's ``key`` (a roadmap and its cell, never two under one key): ``hold`` hands one over
-ahead (the node, before a roadmap serves), else it is handed over with the first request
-that needs it, and again to a child started after one ended. The child answers what its
-planner answers: proven and verified there (``Planner.plan``, ``Planner.divert``), its
+``PlanningProcess.service(key, local)`` returns a ``ProcessService``: the service ``local``
+(a ``service.planning.PlanningService``: the planner, its budget, its station tables) as
+this process answers with it. A pair the station table holds is answered here at once, from
+the table; anything else (``answer``, ``divert``) is planned in the child by the same
+policy, the table's move lent for a port move (``PlanningService.lent_transfer``). The child
+holds the planners of the two latest roadmaps it was handed, each under the caller's ``key``
+(a roadmap and its cell, never two under one key): ``hold`` hands one over ahead
+(``hold_ahead``: the node, as a roadmap serves), else it is handed over with the first
+request that needs it, and again to a child started after one ended. The child answers what
+its planner answers: proven and verified there (``Planner.plan``, ``Planner.divert``), its
 ``PlanningError`` raised here as it was raised there, and what its planner logs (warnings
-and errors) logged here, as if said here. A child that fails or ends fails
-the one request under way (RuntimeError); the next starts another. One that plans on
-``STALLED_AFTER`` s past a request's deadline is ended.
+and errors) logged here, as if said here. A child that fails or ends fails the one request
+under way (RuntimeError); the next starts another. One that plans on ``STALLED_AFTER`` s
+past a request's deadline is ended.
 """
 
 import itertools
 import logging
 import sys
+import threading
 import time
-from typing import Optional
+from typing import Callable, Optional
 
 from wafer_planner_ros import giving_way
 from wafer_planner_ros.cell.limits import LOADED
@@ -40,14 +40,16 @@ from wafer_planner_ros.roadmap.graph import import_for_searches
 from wafer_planner_ros.service.child_process import ChildProcess, load_kernels, run_child
 from wafer_planner_ros.service.planning import PlanningService
 
+PACKAGE = 'wafer_planner_ros'
+"""The logger whose warnings and errors (its modules') the child hands back."""
 NICE = 10
 """How much lower the child's scheduling priority is than its parent's."""
 HOLD_WAIT = 120.0
 """s a roadmap's hand-over is waited for at most (a first child loads its kernels)."""
-HOLD_TURN = 0.5
-"""s a roadmap's hand-over waits at most for a request being planned to end."""
 STALLED_AFTER = 30.0
 """s after a request's deadline its child is ended, if it has not answered by then."""
+CLOSE_WAIT = 0.05
+"""s ``close`` waits for a plan under way to end before it kills the child."""
 ROADMAPS = 2
 """Roadmaps the child holds (the oldest forgotten first): the serving one and the one
 before, for requests received before it served."""
@@ -80,18 +82,33 @@ class PlanningProcess:
         """Return a new key, never given before, for a roadmap to hand over."""
         return next(self._keys)
 
-    def hold(self, key: int, planner: Planner) -> bool:
+    def hold(self, key: int, planner: Planner) -> None:
         """
         Hand the child ``planner``'s cell, roadmap and settings under ``key``, and wait.
 
-        Return False, handing nothing over, while a request is being planned for more than
-        ``HOLD_TURN`` s (the first request that needs it hands it over). Raise RuntimeError
-        when the child fails or ends (the same).
+        Raise RuntimeError when the child fails or ends (the first request that needs it
+        hands it over again).
         """
-        replies = self._child.exchange(lambda held: _held(held, key, planner), turn=HOLD_TURN)
+        replies = self._child.exchange(lambda held: _held(held, key, planner))
         if replies and replies[-1][0] != 'held':
             raise RuntimeError(f'the planning process failed: {replies[-1][1]}')
-        return replies is not None
+
+    def hold_ahead(self, key: int, planner: Planner,
+                   failed: Callable[[RuntimeError], None]) -> threading.Thread:
+        """
+        ``hold`` in a thread of its own, started at once and returned; ``failed(error)``.
+
+        A request that needs the roadmap meanwhile waits for the hand-over (at most the
+        child's start: a few tenths of a second), then is planned.
+        """
+        def hand_over() -> None:
+            try:
+                self.hold(key, planner)
+            except RuntimeError as exc:
+                failed(exc)
+        thread = threading.Thread(target=hand_over, name='wafer_planner_hold', daemon=True)
+        thread.start()
+        return thread
 
     def service(self, key: int, local: PlanningService) -> 'ProcessService':
         """Return ``local`` as it answers with this process (``ProcessService``)."""
@@ -124,8 +141,8 @@ class PlanningProcess:
         raise RuntimeError(f'the planning process failed: {reply[1]}')
 
     def close(self) -> None:
-        """End the child (it ends by itself once its pipe closes)."""
-        self._child.close()
+        """End the child at once (nothing waits for a plan any more)."""
+        self._child.close(wait=CLOSE_WAIT, grace=0.0)
 
 
 def _held(held: set, key: int, planner: Planner) -> list:
@@ -178,7 +195,7 @@ class _Planning:
         """key -> the planner of a roadmap handed over, the latest ``ROADMAPS``."""
         self.loaded = False
         self.said = _Said()
-        logging.getLogger().addHandler(self.said)
+        logging.getLogger(PACKAGE).addHandler(self.said)
 
     def reply(self, message: tuple) -> tuple:
         """Hold a roadmap (``('hold', key, ...)``) or plan a request on one (``'plan'``)."""
