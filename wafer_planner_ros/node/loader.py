@@ -77,7 +77,7 @@ class RoadmapLoader:
         change; ``settings``, ``recording``, ``send``, ``stamp`` as the worker's, ``logger``
         one that never raises; ``failed(message)`` says a failed load in the worker's last
         error (called with the lock held); ``planning``: the process that plans, handed
-        every roadmap before it serves.
+        every roadmap as it serves.
         """
         self.lock = lock
         self._planning = planning
