@@ -17,6 +17,7 @@ loads the compiled kernels as the node does.
 
 from multiprocessing.connection import Connection
 import os
+import pickle
 import subprocess
 import sys
 import threading
@@ -167,7 +168,11 @@ def serve(requests: Connection, replies: Connection, reply: Callable[[tuple], tu
         except Exception as exc:  # noqa: B902 - told to the parent, which goes on
             answer = ('error', f'{type(exc).__name__}: {exc}')
         try:
-            replies.send(answer)
+            try:
+                replies.send(answer)
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                replies.send(('error', f'its answer could not be sent: {type(exc).__name__}: '
+                                       f'{exc}'))
         except (BrokenPipeError, OSError):
             return
 
