@@ -112,3 +112,15 @@ def test_what_the_child_s_planner_logs_is_logged_here(process, planner, monkeypa
         process.service(process.key(), PlanningService(planner)).answer('loadport1', 'x')
     assert [(r.name, r.getMessage()) for r in caplog.records] == [
         (said.name, 'a curve failed; trying the next')]
+
+
+def test_a_roadmap_the_child_could_not_take_is_handed_over_again(process, planner):
+    from types import SimpleNamespace
+    key = process.key()
+    broken = SimpleNamespace(cell=None, roadmap=planner.roadmap, settings=planner.settings)
+    with pytest.raises(RuntimeError, match='the planning process failed'):
+        process.hold(key, broken)
+    # Not counted as held: the first request under that key hands its planner over.
+    service = process.service(key, PlanningService(planner))
+    assert service.answer('loadport1', 'loadlock2').verification.ok
+    assert process.started == 1  # the same child throughout

@@ -91,6 +91,7 @@ class PlanningProcess:
         """
         replies = self._child.exchange(lambda held: _held(held, key, planner))
         if replies and replies[-1][0] != 'held':
+            self._child.held.discard(key)  # not held: handed over again when needed
             raise RuntimeError(f'the planning process failed: {replies[-1][1]}')
 
     def hold_ahead(self, key: int, planner: Planner,
@@ -129,6 +130,7 @@ class PlanningProcess:
             lambda held: _held(held, key, planner) + [head + request], wait)
         for reply in replies[:-1]:
             if reply[0] != 'held':
+                self._child.held.discard(key)  # not held: handed over again next time
                 raise RuntimeError(f'the planning process failed: {reply[1]}')
         reply = replies[-1]
         if reply[0] in ('planned', 'planning'):
