@@ -30,11 +30,14 @@ than ``at``: counted as made ahead) and finds the stop for the moment itself oth
 End to end: from just before the peer publishes the stop request (``~/stop_request``) to
 the later of the peer's receipt of its ``~/result`` and of its trajectory (``~/trajectory``,
 frame_id = the stop's id), both taken in the subscription callbacks (raw: before any
-deserialising). Also per stop the result's ``node_ms`` (from the stop thread's callback to
-the answer made), ``stop_ms`` and ``verify_ms``, and where the rest goes, on the wall clock
-every process shares: the peer's publish, the node's DDS receipt of the request (its
-recording's log time), the result's DDS source time stamp (published: the node publishes
-a stop, then records it), the peer's DDS receipt and its callback.
+deserialising; of a trajectory the callback reads only its header, the rest read later by
+the thread that needs it, so that a long move received just before does not hold the
+executor while the stop's answer waits). Also per stop the result's ``node_ms`` (from the
+stop thread's callback to the answer made), ``stop_ms`` and ``verify_ms``, and where the
+rest goes, on the wall clock every process shares: the peer's publish, the node's DDS
+receipt of the request (its recording's log time), the result's DDS source time stamp
+(published: the node publishes a stop, then records it), the peer's DDS receipt and its
+callback.
 
 Whether a stop was the rest of the move (``'rest'``) is not among the result's values
 (``messages.plan_values`` leaves out the stop's ``timing``); it is told apart here by its
@@ -56,6 +59,7 @@ import json
 import os
 from pathlib import Path
 import platform
+import struct
 import subprocess
 import sys
 import tempfile
@@ -127,13 +131,20 @@ class Peer(Node):
 
     def _on_trajectory(self, data: bytes, info) -> None:
         perf, wall = time.perf_counter(), time.time_ns()
-        msg = deserialize_message(data, JointTrajectory)
-        last = msg.points[-1].time_from_start if msg.points else None
-        self._store(self.trajectories, msg.header.frame_id, {
+        # Only its header is read here (its id and stamp, the first fields of its CDR):
+        # deserialising a move of hundreds of points would hold this executor, and the
+        # next answer's receipt with it, for milliseconds (``trajectory_facts`` reads the
+        # rest later, in the thread that needs it).
+        if data[1] == 1:  # little-endian CDR
+            sec, nanosec, size = struct.unpack_from('<iII', data, 4)
+            frame_id, stamp = bytes(data[16:15 + size]).decode(), sec + 1e-9 * nanosec
+        else:
+            msg = deserialize_message(data, JointTrajectory)
+            frame_id = msg.header.frame_id
+            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        self._store(self.trajectories, frame_id, {
             'perf': perf, 'wall_ns': wall, 'source_ns': info.get('source_timestamp'),
-            'received_ns': info.get('received_timestamp'), 'points': len(msg.points),
-            'duration': last.sec + 1e-9 * last.nanosec if last is not None else 0.0,
-            'stamp': msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec})
+            'received_ns': info.get('received_timestamp'), 'stamp': stamp, 'data': data})
 
     def _store(self, inbox: dict, key: str, entry: dict) -> None:
         with self.lock:
@@ -191,6 +202,16 @@ class Peer(Node):
         self.joints.publish(msg)
 
 
+def trajectory_facts(entry: dict) -> dict:
+    """Add a received trajectory's ``points`` and ``duration`` to its entry; return it."""
+    if 'points' not in entry:
+        msg = deserialize_message(entry['data'], JointTrajectory)
+        last = msg.points[-1].time_from_start if msg.points else None
+        entry.update(points=len(msg.points),
+                     duration=last.sec + 1e-9 * last.nanosec if last is not None else 0.0)
+    return entry
+
+
 def _wait(predicate, timeout: float) -> bool:
     deadline = time.monotonic() + timeout
     while not predicate():
@@ -240,7 +261,7 @@ def _move(peer: Peer, request_id: str, start: str, goal: str) -> dict:
     if values['code'] != 'OK':
         raise RuntimeError(f'{request_id} {start} -> {goal}: {values["code"]} '
                            f'{peer.results[request_id]["message"]}')
-    values['trajectory_duration'] = peer.trajectories[request_id]['duration']
+    values['trajectory_duration'] = trajectory_facts(peer.trajectories[request_id])['duration']
     return values
 
 
@@ -254,6 +275,8 @@ def _stop(peer: Peer, stop_id: str, move_id: str, lead: float) -> dict:
     result = peer.results[stop_id]
     values = result['values']
     trajectory = peer.trajectories.get(stop_id)
+    if trajectory is not None:
+        trajectory_facts(trajectory)
     row = {'id': stop_id, 'move': move_id, 'at': at, 'code': values['code'],
            'method': values.get('method', ''), 'sent_perf': perf, 'sent_ns': wall,
            'result_ms': 1e3 * (result['perf'] - perf),
