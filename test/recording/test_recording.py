@@ -337,6 +337,9 @@ def test_status_notices_a_deleted_directory_before_any_write(tmp_path):
     assert recorder.write_now(_answer(1))
     assert recorder.status()['error'] == ''
     shutil.rmtree(tmp_path / 'bag')
+    # A status asked while the recorder's own thread holds the file (``check`` never waits
+    # for it) sees the loss at the next one, as ``/diagnostics`` asks every second.
+    wait_until(lambda: recorder.status()['error'] != '')
     state = recorder.status()
     assert state['error'] == f'recording stopped: {tmp_path / "bag"} was deleted'
     assert errors == [state['error']] and (state['lost'], state['dropped']) == (0, 0)
