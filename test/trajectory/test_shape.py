@@ -148,6 +148,60 @@ def test_the_sqp_finds_the_optimum_of_a_small_problem():
     assert np.allclose(result.x, [-0.5, -np.sqrt(1.75)], atol=1e-6)
 
 
+def test_a_solve_started_from_a_nearby_solves_matrix_takes_fewer_iterations():
+    """B kept from a solve of a nearby problem (the next round's): the same optimum, sooner."""
+    axes = np.array([0.2, 3.0])   # an ellipse: the Lagrangian's Hessian far from the identity
+
+    def rows(x):
+        d = (x - centre) / axes
+        return np.array([1.0 - d @ d]), (-2.0 * d / axes)[None]
+
+    centre = np.zeros(2)
+    bounds = (np.full(2, -np.inf), np.full(2, np.inf))
+    first = sqp.solve(rows, np.ones(2), np.array([0.1, 0.5]), *bounds, acc=1e-12)
+    centre = np.array([0.01, -0.2])
+    start = first.x + np.array([0.02, 0.3])
+    cold = sqp.solve(rows, np.ones(2), start, *bounds, acc=1e-12)
+    warm = sqp.solve(rows, np.ones(2), start, *bounds, acc=1e-12, hessian=first.hessian)
+    optimum = centre - axes ** 2 / np.linalg.norm(axes)
+    assert cold.converged and warm.converged
+    assert np.allclose(warm.x, optimum, atol=1e-6) and np.allclose(cold.x, optimum, atol=1e-6)
+    assert warm.iterations < cold.iterations
+
+
+def test_within_a_budget_a_refuted_round_starts_the_next_near_its_optimum(
+        default_cell, corridor, monkeypatch):
+    """
+    The rounds after one the proof refuted: without a budget from the last proven curve.
+
+    From the coarse curve of loadport1 -> loadlock2 with one clearance sample a span, the
+    first rounds' optima are refuted. Without a budget the next round starts from the
+    start again, with the identity (as the station table has always been planned); within
+    one, from the refuted optimum with its round's matrix (``ShapeSettings.warm_rounds``).
+    """
+    starts = []
+    real = shape_module._solve
+
+    def spy(problem, current, wafer, clearance, deadline=None, hessian=None):
+        starts.append((current is problem.start, hessian is not None))
+        return real(problem, current, wafer, clearance, deadline, hessian)
+
+    monkeypatch.setattr(shape_module, '_solve', spy)
+    start = coarse_start(corridor.trajectory.control_points, 8, default_cell.robot,
+                         TimingSettings())
+    settings = ShapeSettings(min_spans=8, clearance_samples=1)
+    unbudgeted = optimise_shape(start, default_cell, settings, proven=False)
+    assert starts[:2] == [(True, False), (True, False)]   # refuted: from the start again
+    assert not any(kept for _, kept in starts)
+    starts.clear()
+    budgeted = optimise_shape(start, default_cell, settings, proven=False,
+                              deadline=time.monotonic() + 600.0)
+    assert starts[0] == (True, False) and starts[1] == (False, True)
+    for shaped in (unbudgeted, budgeted):
+        assert prove(shaped.trajectory, default_cell.motion_model,
+                     default_cell.motion_model.lipschitz).certified
+
+
 @pytest.mark.slow
 def test_every_station_pair_optimised_passes_the_independent_check(
         cell, roadmap, roadmap_cache):
@@ -461,5 +515,35 @@ def test_a_budget_too_short_for_the_coarse_stage_still_gets_its_proven_curve(
     late = planner.plan('loadport1', 'loadlock2', branches=(1, 1), budget=1e-6)
     assert 'coarse_cycle_time' in late.metrics and not late.warnings
     assert late.cycle_time == late.metrics['coarse_cycle_time']  # no time for the fine stage
+    assert late.verification.ok and late.verification.proof.certified
+    assert late.cycle_time < 0.8 * corridor.cycle_time
+
+
+def test_a_budget_too_short_for_a_fine_stage_from_an_unproven_coarse_optimum_still_proves_it(
+        default_cell, default_roadmap, monkeypatch):
+    """
+    Where the coarse stage proves nothing, the fine stage from its optimum runs on too.
+
+    A coarse stage that proves nothing is stood in for (its proven curve handed on as its
+    unproven optimum: under a node's deadline, some joint requests' coarse stages prove
+    nothing by half-way to it). Within a budget spent at once, the fine stage from that
+    optimum runs on past it to its first proven curve (no deadline here), where it once
+    stopped at the budget and the answer was the corridor curve, twice as slow.
+    """
+    real = methods.optimise_shape
+
+    def coarse_proves_nothing(start, cell, shape, *args, **options):
+        shaped = real(start, cell, shape, *args, **options)
+        if shape.min_spans <= ShapeSettings().coarse_spans and shaped is not None:
+            shaped = dataclasses.replace(shaped, trajectory=None,
+                                         unproven=shaped.trajectory or shaped.unproven)
+        return shaped
+
+    monkeypatch.setattr(methods, 'optimise_shape', coarse_proves_nothing)
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    corridor = Planner(default_cell, default_roadmap).plan('loadport1', 'loadlock2',
+                                                           branches=(1, 1))
+    late = planner.plan('loadport1', 'loadlock2', branches=(1, 1), budget=1e-6)
+    assert late.metrics['fine_from_unproven'] and not late.warnings
     assert late.verification.ok and late.verification.proof.certified
     assert late.cycle_time < 0.8 * corridor.cycle_time

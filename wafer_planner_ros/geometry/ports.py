@@ -43,6 +43,8 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
+from wafer_planner_ros.kernels import kernel
+
 DEFAULT_LATERAL_TOLERANCE = 0.001
 """m: how far off the port's axis the wafer centre may be while inside, by default."""
 DEFAULT_HEADING_TOLERANCE = 0.0087
@@ -164,6 +166,10 @@ class PortModel:
                            for kind in MARGINS)
         self.tolerances = np.repeat([p.lateral_tolerance for p in self.ports], len(MARGINS))
         """(4P,) m: the largest value of each margin (the port's lateral tolerance)."""
+        self._frames = np.array([[*p.retracted, *p.axis, *p.normal, p.heading,
+                                  p.lateral_tolerance, p.heading_tolerance, p.heading_scale]
+                                 for p in self.ports], float).reshape(-1, 10)
+        """(P, 10): each port as ``_port_margins`` takes it."""
 
     def keeping_out(self, radius: float, ends: np.ndarray) -> 'PortModel':
         """
@@ -237,49 +243,90 @@ class PortModel:
         return where, offset, turn
 
     def _margins(self, q, gradients: bool) -> tuple:
-        q = np.atleast_2d(np.asarray(q, float)).reshape(-1, 3)
-        n = len(q)
-        values = np.empty((n, len(self)))
-        grad = np.zeros((n, len(self), 3)) if gradients else None
-        if not self.ports:
-            return values, grad
-        centers, heading = self.arm.wafer_center(q), self.arm.heading(q)
-        jac = self.arm.jacobian(q) if gradients else None                 # (N, 2, 3)
-        for k, port in enumerate(self.ports):
-            s, y = port.offsets(centers)
-            side = np.where(y >= 0.0, 1.0, -1.0)
-            dh = _wrapped(heading - port.heading)
-            outside = (np.abs(y) - s) / np.sqrt(2.0)
-            radius = self.keep_out[k]
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, float)).reshape(-1, 3))
+        values = np.empty((len(q), len(self)))
+        grad = np.zeros((len(q), len(self), 3) if gradients else (0, 0, 3))
+        if self.ports:
+            _port_margins(q, np.asarray(self.arm.base, float),
+                          np.asarray(self.arm.link_lengths, float), self._frames,
+                          self.keep_out, gradients, values, grad)
+        return values, (grad if gradients else None)
+
+
+@kernel(nogil=True)
+def _port_margins(q, base, lengths, frames, keep_out, gradients, values, grad):
+    """
+    Write each configuration's port margins (``PortModel.margins``) and their gradient.
+
+    ``frames`` (P, 10): per port its retracted wafer centre (2), axis (2), normal (2),
+    heading, lateral and heading tolerances and R; ``keep_out`` (P,): the disc radii.
+    Writes ``values`` (N, 4P) and, with ``gradients``, ``grad`` (N, 4P, 3), zero on entry:
+    of each max the larger term's gradient (the outside term where they tie; of |y| in it
+    the one on the positive side at zero). A configuration that is not finite is nowhere,
+    as in the clearance model: -inf, no gradient.
+    """
+    root2 = np.sqrt(2.0)
+    l1, l2, l3 = lengths[0], lengths[1], lengths[2]
+    across = np.empty(3)
+    along = np.empty(3)
+    d_outside = np.empty(3)
+    for n in range(len(q)):
+        t1 = q[n, 0]
+        t2 = t1 + q[n, 1]
+        t3 = t2 + q[n, 2]
+        if not (np.isfinite(q[n, 0]) and np.isfinite(q[n, 1]) and np.isfinite(q[n, 2])):
+            values[n, :] = -np.inf
+            continue
+        x1, x2, x3 = l1 * np.cos(t1), l2 * np.cos(t2), l3 * np.cos(t3)
+        y1, y2, y3 = l1 * np.sin(t1), l2 * np.sin(t2), l3 * np.sin(t3)
+        cx = base[0] + ((x1 + x2) + x3)
+        cy = base[1] + ((y1 + y2) + y3)
+        # d(centre)/dq: column i sums the links i..2, all turned by joint i
+        jx = (-(y3 + y2 + y1), -(y3 + y2), -y3)
+        jy = (x3 + x2 + x1, x3 + x2, x3)
+        for k in range(len(frames)):
+            rx, ry, ux, uy, nx, ny = frames[k, 0], frames[k, 1], frames[k, 2], \
+                frames[k, 3], frames[k, 4], frames[k, 5]
+            heading, tol, turn_tol, scale = frames[k, 6], frames[k, 7], frames[k, 8], \
+                frames[k, 9]
+            dx, dy = cx - rx, cy - ry
+            s = dx * ux + dy * uy
+            y = dx * nx + dy * ny
+            dh = -((np.pi - (t3 - heading)) % (2.0 * np.pi) - np.pi)
+            outside = (abs(y) - s) / root2
+            radius = keep_out[k]
+            tip = 1.0
+            in_disc = False
             if radius > 0.0:
                 tip = np.hypot(s, y)
                 in_disc = tip - radius < outside
-                outside = np.minimum(outside, tip - radius)
-            tol, scale = port.lateral_tolerance, port.heading_scale
-            terms = (tol - y, tol + y, scale * (port.heading_tolerance - dh),
-                     scale * (port.heading_tolerance + dh))
-            first = len(MARGINS) * k
-            for m, term in enumerate(terms):
-                values[:, first + m] = np.maximum(outside, term)
+                outside = min(outside, tip - radius)
+            first = 4 * k
+            terms = (tol - y, tol + y, scale * (turn_tol - dh), scale * (turn_tol + dh))
+            for m in range(4):
+                values[n, first + m] = max(outside, terms[m])
             if not gradients:
                 continue
-            along = np.einsum('i,nij->nj', port.axis, jac)                  # ds/dq
-            across = np.einsum('i,nij->nj', port.normal, jac)               # dy/dq
-            d_outside = (side[:, None] * across - along) / np.sqrt(2.0)
-            if radius > 0.0:
-                d_tip = (s[:, None] * along + y[:, None] * across) / \
-                    np.maximum(tip, 1e-12)[:, None]
-                d_outside = np.where(in_disc[:, None], d_tip, d_outside)
-            turning = np.full_like(across, scale)                            # d(R dh)/dq
-            for m, (term, d_term) in enumerate(zip(terms, (-across, across, -turning,
-                                                           turning))):
-                grad[:, first + m] = np.where((outside >= term)[:, None], d_outside, d_term)
-        # A configuration that is not finite is nowhere: as in the clearance model.
-        finite = np.isfinite(q).all(axis=1)
-        values[~finite] = -np.inf
-        if gradients:
-            grad[~finite] = 0.0
-        return values, grad
+            side = 1.0 if y >= 0.0 else -1.0
+            for i in range(3):
+                along[i] = ux * jx[i] + uy * jy[i]      # ds/dq
+                across[i] = nx * jx[i] + ny * jy[i]     # dy/dq
+                if in_disc:
+                    d_outside[i] = (s * along[i] + y * across[i]) / max(tip, 1e-12)
+                else:
+                    d_outside[i] = (side * across[i] - along[i]) / root2
+            for m in range(4):
+                for i in range(3):
+                    if outside >= terms[m]:
+                        grad[n, first + m, i] = d_outside[i]
+                    elif m == 0:
+                        grad[n, first + m, i] = -across[i]
+                    elif m == 1:
+                        grad[n, first + m, i] = across[i]
+                    elif m == 2:
+                        grad[n, first + m, i] = -scale
+                    else:
+                        grad[n, first + m, i] = scale
 
 
 class PortedModel:

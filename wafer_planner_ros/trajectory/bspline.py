@@ -194,21 +194,25 @@ class CubicBSpline(Trajectory):
         Return the derivatives of the given orders at times t, each (len(t), 3).
 
         Each span is a cubic polynomial; its Taylor coefficients at the span's start come
-        from the B-spline basis once (``_pieces``), then every time costs one Horner sum.
+        from the B-spline basis once (``_pieces``), then every time costs one Horner sum;
+        at the ends, the derivative curves' end control points.
         """
         t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
         starts, coefficients = self._pieces
         span = np.clip(np.searchsorted(starts, t, side='right') - 1, 0, len(starts) - 1)
         out = []
+        # A clamped curve's derivatives at its ends are its derivative curves' end control
+        # points: exact there (a curve at rest at an end is exactly at rest; the Horner sum
+        # left rounding, 1e-16 rad/s^2); only where its spans begin at 0 and end at T
+        # (otherwise it runs on, continuous).
+        first = t <= 0.0 if starts[0] == 0.0 else np.zeros(len(t), bool)
+        last = t >= self.duration if self.knots[-DEGREE - 1] == self.duration else \
+            np.zeros(len(t), bool)
         for order in orders:
             values = _horner(coefficients, starts, span, t, order)
-            if order == 0:
-                # A clamped curve passes through its end points; make that exact (only where
-                # its spans begin at 0 and end at T: otherwise it runs on, continuous).
-                if starts[0] == 0.0:
-                    values[t <= 0.0] = self.control_points[0]
-                if self.knots[-DEGREE - 1] == self.duration:
-                    values[t >= self.duration] = self.control_points[-1]
+            if first.any() or last.any():
+                ends = self.derivative(order)[0] if order else self.control_points
+                values[first], values[last] = ends[0], ends[-1]
             out.append(values)
         return tuple(out)
 

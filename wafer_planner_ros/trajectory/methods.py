@@ -159,7 +159,8 @@ class WholeCurve(KnotTiming):
     fails verification: the curve returned is proven collision-free on its own
     (``proof``), not by the corridor. Within a time budget (``until``) the coarse stage
     runs on past it to its first proven curve, up to half-way to the request's
-    ``deadline`` (``_past_budget``), and the fine stage stops at the budget. The metrics
+    ``deadline`` (``_past_budget``), and so does a fine stage started from its unproven
+    optimum; a fine stage from a proven curve stops at the budget. The metrics
     say where the fine stage started: from the coarse stage's proven curve
     (``coarse_cycle_time`` its cycle time), from its unproven optimum
     (``fine_from_unproven``), or else from the corridor curve.
@@ -233,9 +234,14 @@ class WholeCurve(KnotTiming):
             # Its last optimum lies millimetres into a wall between its samples: the fine
             # stage's spans and samples prove it or a curve near it in a round or two,
             # where from the corridor curve (far slower) its subproblems fail for
-            # rounds on end.
+            # rounds on end. Within a budget, as the coarse stage, on past it to its
+            # first proven curve (half-way to the deadline at most): else the answer is
+            # the corridor curve, often twice as slow (seconds of motion, for tenths of
+            # a second of planning; doc/benchmark.md).
             shaped = optimise_shape(coarse.unproven, self.cell, fine, self.settings,
-                                    give_up_above, until, proven=False, keep_out=keep_out)
+                                    give_up_above, _past_budget(until, deadline),
+                                    proven=False, first_proven=until is not None,
+                                    keep_out=keep_out)
             if shaped is None:
                 return None  # its optimum is far slower than the best so far
             if shaped.trajectory is None:

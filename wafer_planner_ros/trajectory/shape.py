@@ -29,7 +29,12 @@ further where it still exceeds one at the verification's times, ``meet_limits``)
 proven collision-free; where a piece cannot be proven, clearance samples are added there,
 and wherever a scan of the curve finds a body nearer a wall than its samples keep, and the
 problem is solved again. Only proven curves are kept: the fastest is returned, or
-the start (if proven) when none beats it.
+the start (if proven) when none beats it. Each round starts from the last proven curve (or
+the start); within a time budget (``deadline``), where each iteration counts, from the last
+round's B (the rows it adds change the Lagrangian little) and from its optimum even where
+the proof refuted it, up to ``ShapeSettings.warm_rounds`` rounds in a row: a few
+iterations each, where from the last proven curve each round took most of the first
+one's iterations again.
 
 A curve whose start is pinned to a moving robot's state (``ShapeProblem.pinned``: a divert,
 ``continuing``) cannot be λ-scaled (slowed, it would leave that state): it is kept only as
@@ -123,11 +128,14 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
     clearance = _clearance_samples(problem, *grid)
     lower, upper = problem.positions.inner
     iterations, message, unproven = 0, '', None
+    proven_last, hessian, warm = current, None, 0
+    chained = deadline is not None   # rounds started near the last one's (``warm_rounds``)
     for rounds in range(1, shape.max_rounds + 1):
         if deadline is not None and time.monotonic() >= deadline:
             message = 'the time budget ran out'
             break
-        result = _solve(problem, current, wafer, clearance, deadline)
+        result = _solve(problem, current, wafer, clearance, deadline, hessian)
+        hessian = result.hessian if chained else None
         iterations += result.nit
         # The bounds hold to the QP's precision: rounding beyond them is taken back (the
         # fixed end points stay exactly where they are).
@@ -193,7 +201,8 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
             message = f'no curve was proven ({result.message})'
             break
         if proof.certified:
-            current = curve  # feasible everywhere: the next solve starts there
+            current = proven_last = curve  # feasible everywhere: the next solve starts there
+            warm = 0
             # Kept only if faster than the best so far, or than the start when it is not
             # proven (a failed solve can end on a far slower curve that is still proven).
             if within and problem.total(curve) < problem.total(
@@ -204,6 +213,10 @@ def optimise_shape(start: CubicBSpline, cell, shape: ShapeSettings = ShapeSettin
         else:
             if result.converged:
                 unproven = curve
+            if chained and result.converged and warm < shape.warm_rounds:
+                current, warm = curve, warm + 1   # near the next optimum (``warm_rounds``)
+            else:
+                current, hessian, warm = proven_last, None, 0
             # Sample the pieces that could not be proven, for every body, and every stretch
             # of the curve nearer a wall than the samples keep (the proof stops at its
             # first collision: one sample a round would leave the others for later rounds),
@@ -305,10 +318,12 @@ class _Solved:
     """The solver stopped at an optimum (not at its iteration limit or a failure)."""
     speeds: tuple = ()
     """Each free end's (v, a) (``shape_problem.FreeEnd``)."""
+    hessian: Optional[tuple] = None
+    """(the solver's last B, the durations' scale of its variables): the next round's B."""
 
 
 def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
-           deadline: Optional[float] = None):
+           deadline: Optional[float] = None, hessian: Optional[tuple] = None):
     """
     Run SLSQP's method (``sqp``) from ``start``: durations relative to the start's.
 
@@ -318,10 +333,23 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     (``time.monotonic()``) it stops where it is. Rows are weighted to norm 1 near the
     start, rows that do not depend on the variables dropped: unweighted, with Jacobian
     entries many orders of magnitude apart, SLSQP's subproblem took several times as long
-    per iteration.
+    per iteration. ``hessian``: a round's ``_Solved.hessian``, B to start from (its duration
+    columns rescaled to this start's), else the identity.
     """
     single_blas_thread()
     scale = start.intervals.copy()
+    first_b = None
+    if hessian is not None:
+        first_b, before = hessian
+        turned = np.ones(len(first_b))
+        turned[problem._duration_column] = scale / before
+        first_b = first_b * np.outer(turned, turned)
+    first_b = None
+    if hessian is not None:
+        first_b, before = hessian
+        rescaled = np.ones(len(first_b))  # d (x then) / d x, for the durations' columns
+        rescaled[problem.duration_columns] = scale / before
+        first_b = first_b * np.outer(rescaled, rescaled)
     x0 = problem.pack(start.control_points, start.intervals, scale)
     # A row's norm at the start and at a point nearby: zero at both, it does not depend on
     # the variables at all (a velocity control point between two fixed points); zero at
@@ -352,7 +380,7 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
                        first=(first[0][keep] * weights, first[1][keep] * weights[:, None]),
                        stop=None if deadline is None else
                        (lambda: time.monotonic() >= deadline),
-                       qp_iterations=problem.settings.qp_iterations)
+                       qp_iterations=problem.settings.qp_iterations, hessian=first_b)
     points, intervals = problem.unpack(result.x, scale)
     return _Solved(points, intervals, result.iterations, result.message, result.converged,
-                   tuple(problem.speeds_of(result.x)))
+                   tuple(problem.speeds_of(result.x)), (result.hessian, scale))

@@ -186,6 +186,11 @@ class ShapeProblem:
                 self._raw_column[index] = self.variables + 6 * n + 3 * m + np.arange(3)
         self._raw_width = self.variables + 6 * len(self._free_ends)
 
+    @property
+    def duration_columns(self) -> np.ndarray:
+        """Return the solver's columns of the span durations."""
+        return self._duration_column
+
     def drop_keep_outs(self) -> bool:
         """
         Let the rows keep the port rule alone; return whether they kept keep-outs.

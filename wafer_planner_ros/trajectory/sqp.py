@@ -3,11 +3,12 @@ SLSQP's method with a faster subproblem: the whole-curve optimiser's solver.
 
 Problem: minimise c . x (a linear objective) subject to g(x) >= 0 and lb <= x <= ub.
 The iteration is Kraft's SLSQP (1988), as scipy runs it: a quasi-Newton matrix B of the
-Lagrangian (BFGS with Powell's damping, from the identity), the quadratic subproblem
-``min c.s + s'Bs/2, g + J s >= 0, lb <= x + s <= ub``, an l1 merit function with one
-penalty per constraint (mu = max(u, (mu + u)/2)), a line search that cuts the step at most
-ten times (by quadratic interpolation, never below a tenth of the last step), and the same
-stopping rule (|f - f_previous| < acc with constraint violation < acc). What differs:
+Lagrangian (BFGS with Powell's damping, from the identity or a given B), the quadratic
+subproblem ``min c.s + s'Bs/2, g + J s >= 0, lb <= x + s <= ub``, an l1 merit function
+with one penalty per constraint (mu = max(u, (mu + u)/2)), a line search that cuts the step
+at most ten times (by quadratic interpolation, never below a tenth of the last step), and
+the same stopping rule (|f - f_previous| < acc with constraint violation < acc). What
+differs:
 
 - the subproblem is solved by daqp (a dual active-set QP solver; dense, for a positive
   definite B) warm-started from the last active set, instead of SLSQP's LSQ/NNLS,
@@ -46,19 +47,23 @@ class SqpResult:
     iterations: int
     message: str
     converged: bool
+    hessian: np.ndarray
+    """B at the end: a start for a solve of a nearby problem in the same variables."""
 
 
 def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray,
           max_iterations: int = 100, acc: float = 1e-4,
           first: Optional[tuple] = None,
           stop: Optional[Callable[[], bool]] = None,
-          qp_iterations: int = QP_ITERATIONS) -> SqpResult:
+          qp_iterations: int = QP_ITERATIONS,
+          hessian: Optional[np.ndarray] = None) -> SqpResult:
     """
     Minimise c . x subject to evaluate(x)[0] >= 0 and lb <= x <= ub (see the module).
 
     ``evaluate(x) -> (g (m,), J (m, n))``; ``first``: its value at x0 if known. Bounds may
     be infinite. ``stop()`` true before an iteration ends the solve where it is.
-    ``qp_iterations``: daqp iterations per subproblem at most.
+    ``qp_iterations``: daqp iterations per subproblem at most. ``hessian``: B to start from
+    (positive definite: a nearby problem's ``SqpResult.hessian``), else the identity.
     """
     n = len(x0)
     lb = np.where(np.isfinite(lb), lb, -INF)
@@ -67,7 +72,7 @@ def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub:
     g, J = evaluate(x) if first is None else first
     m = len(g)
     f = float(c @ x)
-    B = np.eye(n)
+    B = np.eye(n) if hessian is None else np.array(hessian, float)
     mu, u = np.zeros(m), np.zeros(m)
     sense = np.zeros(n + m, dtype=np.int32)
     upper_rows = np.full(m, INF)
@@ -117,7 +122,7 @@ def solve(evaluate: Callable, c: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub:
         if abs(f - f_old) < acc and np.maximum(-g, 0.0).sum() < acc and not relaxed:
             message = 'converged'
             break
-    return SqpResult(x, u, iteration, message, message == 'converged')
+    return SqpResult(x, u, iteration, message, message == 'converged', B)
 
 
 def _relaxed(B, c, J, g, lo, hi, qp_iterations: int) -> tuple:

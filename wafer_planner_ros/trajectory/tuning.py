@@ -106,6 +106,15 @@ class ShapeSettings:
     """m: bodies this near a wall at a sample have their clearance constrained there."""
     max_rounds: int = 6
     """Solves at most, each after adding samples where the last answer fell short."""
+    warm_rounds: int = 2
+    """Within a time budget, rounds in a row at most that start from the last round's
+    optimum where the proof refuted it, with its quasi-Newton matrix (``shape``): a few
+    iterations each, where from the last proven curve most of the first round's were taken
+    again. Some such chains never prove a curve (the optimum moves from one wall to the
+    next); after this many a round starts from the last proven curve, with every sample
+    added so far, as each round does without a budget (there, more thorough: a chain
+    proved a coarse curve in a slower way round a pillar, where those rounds went on to
+    the faster one; doc/benchmark.md)."""
     max_iterations: int = 100
     """SLSQP iterations per solve at most."""
     ftol: float = 1e-4
