@@ -77,6 +77,7 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_live.py
 	$(ENV) $(PY) bench/bench_cell.py
 	$(ENV) $(PY) bench/bench_optimiser.py --seeds 1 2 3
+	$(ENV) $(PY) bench/bench_free_moves.py --seeds 1 2 3
 	$(ENV) $(PY) bench/bench_table.py
 	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
 	$(ENV) $(PY) bench/bench_ports.py

@@ -341,12 +341,6 @@ def _solve(problem: ShapeProblem, start: CubicBSpline, wafer, clearance,
     first_b = None
     if hessian is not None:
         first_b, before = hessian
-        turned = np.ones(len(first_b))
-        turned[problem._duration_column] = scale / before
-        first_b = first_b * np.outer(turned, turned)
-    first_b = None
-    if hessian is not None:
-        first_b, before = hessian
         rescaled = np.ones(len(first_b))  # d (x then) / d x, for the durations' columns
         rescaled[problem.duration_columns] = scale / before
         first_b = first_b * np.outer(rescaled, rescaled)
