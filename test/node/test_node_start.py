@@ -221,7 +221,7 @@ def test_a_station_pair_of_the_table_is_answered_at_once_while_joint_requests_pl
 @pytest.mark.slow
 def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
         table_node, default_cell, monkeypatch):
-    from node_harness import values
+    from node_harness import values, wait_for
     from rclpy.parameter import Parameter
     from wafer_planner_ros.service.planning_process import ProcessService
     timeout = 1.0
@@ -242,6 +242,11 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
         for request_id, (start, goal) in zip(ids, pairs):
             sent[request_id] = time.monotonic()
             table_node.send_joints(request_id, start, goal)
+            if request_id == ids[0]:
+                # The first taken from the queue (it stalls there) before the others fill
+                # it: under load the worker once took it only after the fourth arrived,
+                # which found the queue full (BUSY).
+                wait_for(lambda: table_node.node._worker._planned, timeout)
         arrived = _arrivals(table_node, ids, 120.0)
         # The three answered TIMEOUT while they waited no longer fill the queue.
         queued = table_node.status()['queue']
