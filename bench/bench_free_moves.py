@@ -7,10 +7,13 @@ packaged ``planning.timeout``: how long it takes and how near its answer is to t
 unbudgeted optimum. For each cell and roadmap seed (``free_moves_runner.py``, each run in a
 process of its own): first the references by this checkout (every station pair and
 ``--joints`` random free joint pairs, unbudgeted), then the budgeted answers of this
-checkout and of commit ``--old`` (default 940f9b0, before warm rounds and the compiled port
-margins), one after the other, their order alternating from one cell and seed to the next
-(so that the machine's drift falls on both alike): the random joint pairs, then the station
-pairs asked as the joint angles of their unbudgeted answers. The old commit's files are
+checkout and of commit ``--old`` (default 8937658, before the library of optima), one after
+the other, their order alternating from one cell and seed to the next (so that the
+machine's drift falls on both alike): the random joint pairs, then the station pairs asked
+as the joint angles of their unbudgeted answers, then joint angles near those (each joint
+of each end moved by up to 0.1 rad: a station re-taught a little, a pose near a station's).
+A version with a library of optima has the station pairs' curves in it first, as the node
+keeps its station table's. The old commit's files are
 extracted as ``bench_optimiser.py`` does (kept under ``~/.cache``; its kernels compile on
 the first run, about a minute, in a warm-up run of each version before any timing).
 
@@ -33,6 +36,7 @@ import platform
 import subprocess
 import sys
 import tempfile
+from typing import Optional
 
 from bench_optimiser import CELLS, extracted  # bench/ is the script's folder, on sys.path
 import numpy as np
@@ -40,7 +44,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / 'results' / 'free_moves.json'
-OLD = '940f9b0'
+OLD = '8937658'
 OPTIMAL_CONTROL = {
     ('loadport1', 'loadlock1'): 1.464, ('loadport1', 'loadlock2'): 2.036,
     ('loadport2', 'loadlock1'): 1.567, ('loadport2', 'loadlock2'): 1.568,
@@ -65,7 +69,7 @@ def run(package_root: Path, *args) -> dict:
 
 def summary(rows: list) -> dict:
     """Return the figures of one version's rows (``rows``: the runs' rows, with ratios)."""
-    joints = [r for r in rows if r['kind'] == 'joint' and r['reference'] is not None]
+    joints = [r for r in rows if r['kind'] == 'joint']
     answered = [r for r in joints if r['ratio'] is not None]
     ms = np.array([r['planning_ms'] for r in joints])
     ratio = np.array([r['ratio'] for r in answered])
@@ -85,7 +89,24 @@ def summary(rows: list) -> dict:
             'median': float(np.median(over_oc)), 'worst': float(max(over_oc))},
         'stations_as_joints_planning_ms': {
             'median': float(np.median([r['planning_ms'] for r in stations])),
-            'max': float(max(r['planning_ms'] for r in stations))}}
+            'max': float(max(r['planning_ms'] for r in stations))},
+        'near_stations': _near(rows)}
+
+
+def _near(rows: list) -> Optional[dict]:
+    """Return the figures of the requests near station pairs (None: none answered)."""
+    near = [r for r in rows if r['kind'] == 'near']
+    answered = [r for r in near if r['ratio'] is not None]
+    if not answered:
+        return None
+    ms = np.array([r['planning_ms'] for r in near])
+    ratio = np.array([r['ratio'] for r in answered])
+    return {'requests': len(near), 'failed': len(near) - len(answered),
+            'from_optimum': sum(bool(r['from_optimum']) for r in answered),
+            'planning_ms': {'median': float(np.median(ms)),
+                            'p99': float(np.percentile(ms, 99)), 'max': float(ms.max())},
+            'over_unbudgeted': {'median': float(np.median(ratio)),
+                                'worst': float(ratio.max())}}
 
 
 def main() -> int:
@@ -134,9 +155,20 @@ def main() -> int:
              ('stations as joints: / unbudgeted, worst',
               'stations_as_joints_over_unbudgeted', 'worst', '.3f'),
              ('stations as joints: / optimal control, worst',
-              'stations_as_joints_over_optimal_control', 'worst', '.3f'))
+              'stations_as_joints_over_optimal_control', 'worst', '.3f'),
+             ('stations as joints: planning ms, median',
+              'stations_as_joints_planning_ms', 'median', '.0f'))
     for label, group, key, form in lines:
         values = [(figures[v][group] or {}).get(key) for v in ('new', 'old')]
+        print(f'{label:44}' + ''.join(f'{"-" if x is None else format(x, form):>16}'
+                                      for x in values))
+    for label, key, form in (('near stations: planning ms, median', 'median', '.0f'),
+                             ('near stations: planning ms, p99', 'p99', '.0f'),
+                             ('near stations: / unbudgeted, median', 'median', '.4f'),
+                             ('near stations: / unbudgeted, worst', 'worst', '.3f')):
+        group = 'planning_ms' if 'ms' in label else 'over_unbudgeted'
+        values = [((figures[v]['near_stations'] or {}).get(group) or {}).get(key)
+                  for v in ('new', 'old')]
         print(f'{label:44}' + ''.join(f'{"-" if x is None else format(x, form):>16}'
                                       for x in values))
     RESULTS.parent.mkdir(exist_ok=True)
@@ -152,12 +184,14 @@ def _rows(name: str, seed: int, reference: dict, got: dict) -> list:
     """Return one version's rows of a cell and seed, with their ratios to the references."""
     rows = []
     for kind, refs, answers in (('joint', reference['joints'], got['joints']),
-                                ('station', reference['stations'], got['stations'])):
+                                ('station', reference['stations'], got['stations']),
+                                ('near', reference['near'], got['near'])):
         for ref, row in zip(refs, answers):
             if ref['code'] != 'OK':
                 continue  # not a request that has an answer (e.g. an end inside a port)
             made = {'cell': name, 'seed': seed, 'kind': kind, 'code': row['code'],
                     'planning_ms': row.get('planning_ms'), 'reference': ref['duration'],
+                    'from_optimum': row.get('from_optimum', False),
                     'ratio': None if row.get('duration') is None
                     else row['duration'] / ref['duration']}
             if kind == 'station':

@@ -29,6 +29,9 @@ def test_joint_angle_ends_and_an_unproven_curve_say_so():
     assert lines[0].startswith('cycle time 1.585 s (λ-scaled start 3.089 s), joint angles -> '
                                'elbow right (knot-timing, planned for this request)')
     assert lines[2].endswith('; NOT proven collision-free')
+    lines = described(dict(values, method='whole-curve', from_optimum='True'))
+    assert lines[0].endswith('(whole-curve, planned for this request, from a kept optimum '
+                             'near it)')
 
 
 def test_an_error_result_names_its_code_and_only_what_it_has():

@@ -13,6 +13,7 @@ from wafer_planner_ros.cell.limits import EMPTY, LOADED, LOADS
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.service.optima_store import load_optima, optima_path
 from wafer_planner_ros.service.settings import settings_from
 from wafer_planner_ros.service.table import build_table, load_table, table_key
 from wafer_planner_ros.service.table import port_pairs, table_pairs
@@ -34,8 +35,8 @@ def test_station_requests_are_answered_from_the_table_the_node_planned(
                           and s['busy_with'] != 'station_table')(node.status()), 300)
         # The table the node stored is the one it answers from.
         roadmap = load_or_build(default_cell, cache_dir=cache).roadmap
-        stored = load_table(Planner(default_cell, roadmap, PlannerSettings(
-            method='whole-curve')), cache)
+        stored_planner = Planner(default_cell, roadmap, PlannerSettings(method='whole-curve'))
+        stored = load_table(stored_planner, cache)
         node.send_stations({'id': 't1', 'from': 'loadport1', 'to': 'loadlock2'})
         result = node.result('t1')
         assert result.level == DiagnosticStatus.OK, result.message
@@ -52,8 +53,35 @@ def test_station_requests_are_answered_from_the_table_the_node_planned(
         assert got['code'] == 'OK', got
         assert got['source'] == 'planned' and got['method'] == 'whole-curve'
         assert float(got['budget']) == pytest.approx(0.2)
+        # Near a station pair the table holds: started from its curve, kept as an optimum.
+        curve = stored.entries[('loadport1', 'loadlock2')]['trajectory']['control_points']
+        node.send_joints('t3', *(_near(stored_planner, q, role) for q, role in (
+            (curve[0], 'start'), (curve[-1], 'goal'))))
+        got = values(node.result('t3'))
+        assert got['code'] == 'OK' and got['from_optimum'] == 'True', got
+        assert got['certified'] == 'True'
+        assert float(got['cycle_time']) == pytest.approx(knots[-1] - knots[0], rel=0.05)
     finally:
         node.close()
+    # Stored when the node stopped: the table's curves and the answers, each verified again
+    # on load, all passing.
+    again = Planner(default_cell, roadmap, PlannerSettings(method='whole-curve'))
+    loaded = load_optima(again, cache)
+    assert loaded.rejected == () and loaded.kept >= pairs + 2
+    assert loaded.path == optima_path(cache, table_key(again))
+
+
+def _near(planner, q, role: str) -> np.ndarray:
+    """Return joint angles 0.03-0.05 rad from ``q`` on each joint, a valid end of a request."""
+    from wafer_planner_ros.errors import PlanningError
+    for signs in np.array(np.meshgrid(*[[1.0, -1.0]] * 3)).reshape(3, -1).T:
+        moved = np.asarray(q, float) + signs * np.array([0.03, 0.04, 0.05])
+        try:
+            planner.endpoint(moved, role)  # outside every port, clear of the walls
+        except PlanningError:
+            continue
+        return moved
+    raise AssertionError(f'no valid end near {q}')
 
 
 @pytest.mark.slow

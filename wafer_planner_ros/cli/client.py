@@ -102,7 +102,10 @@ def described(values: dict) -> list:
             line += f", {summary.branches_text(summary.branches(values['branches']))}"
         if values.get('load', LOADED) != LOADED:
             line += f", {values['load']}"
-        line += f" ({values.get('method') or 'planned'}, {_source(values.get('source', ''))})"
+        source = _source(values.get('source', ''))
+        if values.get('from_optimum') == 'True':
+            source += ', from a kept optimum near it'
+        line += f" ({values.get('method') or 'planned'}, {source})"
         lines.append(line)
     if number.get('min_clearance') is not None:
         ratios = {k[len('ratio_'):]: v for k, v in number.items()

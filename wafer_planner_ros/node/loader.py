@@ -35,8 +35,10 @@ from wafer_planner_ros.node import markers
 from wafer_planner_ros.node.faults import reason_of
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
-from wafer_planner_ros.node.serving import build_station_tables, load_station_tables
-from wafer_planner_ros.node.serving import progress_reporter, Serving, table_to_plan
+from wafer_planner_ros.node.serving import build_station_tables, learn_tables
+from wafer_planner_ros.node.serving import load_optima_files, load_station_tables
+from wafer_planner_ros.node.serving import progress_reporter, save_optima_files, Serving
+from wafer_planner_ros.node.serving import table_to_plan
 from wafer_planner_ros.node.startup import kernels_ready, since_process_start
 from wafer_planner_ros.planner import Planner, PlannerSettings
 from wafer_planner_ros.roadmap.cache import load_or_build
@@ -194,6 +196,7 @@ class RoadmapLoader:
             tables = load_station_tables(planner, settings, self._logger)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not loaded: {reason_of(exc)}')
+        learn_tables(planner, tables)  # drafts for requests near the stations
         roadmap = cached.roadmap
         # The planning process takes the roadmap meanwhile (a request waits for that: a few
         # tenths of a second once the process has started; the first request that needs it
@@ -246,18 +249,24 @@ class RoadmapLoader:
             self._recording.markers(roadmap_markers)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
+        try:
+            load_optima_files(planner, settings, self._logger)
+        except Exception as exc:  # noqa: B902 - only requests near them are slower
+            self._logger.error(f'optima not loaded: {reason_of(exc)}')
         if not table_to_plan(planner, tables, settings):
             return
 
         def publish(load: str, table) -> None:
             with self.lock:
                 serving.service.set_table(load, table)
+            learn_tables(planner, {load: table})
 
         try:
             build_station_tables(planner, settings, self._logger, tables, publish,
                                  self._table_stopped)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
+        save_optima_files(planner, settings, self._logger)
         self.enter(Phase.LOADING)  # the table planned: the load ends
 
     def _kernels_compiling(self) -> None:

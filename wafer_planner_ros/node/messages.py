@@ -80,6 +80,7 @@ def plan_values(result, roadmap, start, goal) -> dict:
     values['method'] = result.metrics.get('method', '')
     values['source'] = result.metrics.get('source', 'planned')
     values['budget'] = result.metrics.get('budget', 0.0)
+    values['from_optimum'] = bool(result.metrics.get('from_optimum', False))
     if 'braking_from' in result.metrics:  # a stop: the moment it brakes from
         values['braking_from'] = result.metrics['braking_from']
     return values

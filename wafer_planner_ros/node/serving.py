@@ -19,10 +19,12 @@ from dataclasses import dataclass
 import time
 from typing import Callable, Dict, Optional
 
-from wafer_planner_ros.cell.limits import EMPTY, LOADED
+from wafer_planner_ros.cell.limits import EMPTY, LOADED, LOADS
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
+from wafer_planner_ros.service.optima_store import learn_table, load_optima, OptimaError
+from wafer_planner_ros.service.optima_store import save_optima
 from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.table import build_and_store_table, lacking, load_table
 from wafer_planner_ros.service.table import port_pairs, StationTable, TableError
@@ -95,6 +97,46 @@ def load_station_tables(planner: Planner, settings, logger) -> Dict[str, Station
         _report(table, logger)
         tables[load] = table
     return tables
+
+
+def load_optima_files(planner: Planner, settings, logger) -> None:
+    """
+    Keep the optima of the cached files and the station tables' curves in ``planner``'s.
+
+    Of every limit set a request may ask for (``optima_store``): each optimum read back is
+    verified in full, those that fail left out and said; a file that cannot be used is
+    said and passed over (only requests near its optima are slower).
+    """
+    for load in LOADS:
+        target = whole_curve(planner).for_load(load)
+        if settings.cache_dir is not None:
+            try:
+                loaded = load_optima(target, settings.cache_dir)
+            except OptimaError as exc:
+                logger.info(f'optima ({load}): {exc}')
+            else:
+                for reason in loaded.rejected:
+                    logger.warning(f'optima ({load}): {reason}; left out')
+                logger.info(f'optima ({load}): {loaded.kept} kept, each verified, in '
+                            f'{loaded.seconds:.2f} s')
+
+
+def learn_tables(planner: Planner, tables: Dict[str, StationTable]) -> None:
+    """Keep the station tables' curves as optima of ``planner`` (``optima_store.learn_table``)."""
+    for load, table in tables.items():
+        learn_table(whole_curve(planner).for_load(load), table)
+
+
+def save_optima_files(planner: Planner, settings, logger) -> None:
+    """Store ``planner``'s optima of every limit set it has any of (with a cache directory)."""
+    if settings.cache_dir is None:
+        return
+    for load, optima in planner.libraries.items():
+        if len(optima):
+            try:
+                save_optima(whole_curve(planner).for_load(load), settings.cache_dir)
+            except OSError as exc:
+                logger.warning(f'optima ({load}) not stored: {exc}')
 
 
 def table_to_plan(planner: Planner, tables: Dict[str, StationTable], settings) -> bool:

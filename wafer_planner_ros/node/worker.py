@@ -38,7 +38,7 @@ from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.loader import Phase, RoadmapLoader
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
-from wafer_planner_ros.node.serving import Serving, table_counts
+from wafer_planner_ros.node.serving import save_optima_files, Serving, table_counts
 from wafer_planner_ros.node.stops import Stops
 from wafer_planner_ros.service.planning_process import PlanningProcess
 from wafer_planner_ros.service.requests import Moving
@@ -48,6 +48,9 @@ PREVIOUS_KEPT_NS = 1_000_000_000
 """How long the previous roadmap is kept for requests received before a new one serves but
 not yet queued (the executor hands them over within milliseconds)."""
 NOT_LOADED = 'the roadmap is being loaded or built'
+OPTIMA_STORED_EVERY = 60.0
+"""s: the optima learnt from the answers (``planner.optima``) are stored at most this often
+after an answer, and when the node stops."""
 
 
 class PlanningWorker:
@@ -86,6 +89,8 @@ class PlanningWorker:
         """Numbers of the queries being planned (not waiting)."""
         self.counts = {'served': 0, 'failed': 0}
         self.last_error = ''
+        self._optima_stored = (time.monotonic(), None)
+        """When the optima were last stored, and what was stored (``_store_optima``)."""
         self.planning = PlanningProcess()
         """The child process planning what the station table does not hold."""
         try:
@@ -236,6 +241,27 @@ class PlanningWorker:
             thread.join(max(0.0, deadline - time.monotonic()))
         self.stops.join(max(0.0, deadline - time.monotonic()))
         self.planning.close()
+        serving = self._loader.serving
+        if serving is not None:
+            self._store_optima(serving, self._settings(), at_once=True)
+
+    def _store_optima(self, serving: Serving, settings, at_once: bool = False) -> None:
+        """
+        Store the optima the serving planner learnt, if any since the last time.
+
+        Not within ``OPTIMA_STORED_EVERY`` s of the last time, unless ``at_once``.
+        """
+        last, stored = self._optima_stored
+        now = time.monotonic()
+        learnt = (id(serving), tuple((load, optima.serial) for load, optima in
+                                     serving.planner.libraries.items()))
+        if learnt == stored or not at_once and now - last < OPTIMA_STORED_EVERY:
+            return
+        self._optima_stored = (now, learnt)
+        try:
+            save_optima_files(serving.planner, settings, self._logger)
+        except Exception as exc:  # noqa: B902 - only requests near them are slower
+            self._logger.error(f'optima not stored: {reason_of(exc)}')
 
     # ----------------------------------------------------------------- planning
 
@@ -385,6 +411,7 @@ class PlanningWorker:
             self._logger.error(f'request {request.request_id}: no path markers: {reason_of(exc)}')
             return
         self._send((Sent.PATH, path, number))
+        self._store_optima(serving, settings)
 
     def _answer_error(self, number: int, request, code, message: str, planning_ms=None,
                       roadmap=None) -> None:

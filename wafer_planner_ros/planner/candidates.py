@@ -109,7 +109,7 @@ def prepare(planner, a: Endpoint, b: Endpoint, qa, qb, branches, stage_ms) -> Pr
     corridor = build_corridor(path, model.body_clearance(path), lipschitz,
                               per_body=settings.per_body_boxes, extra=settings.extra_points)
     clock.lap('corridor')
-    draft = planner.method.draft(corridor)
+    draft = planner.method.draft(corridor, planner.optima.nearest(qa, qb))
     clock.lap('spline')
     fastest = float(planner.cell.robot.limits.shortest_motion(qb - qa).max())
     return Prepared(a, b, qa, qb, branches, roadmap_path, path, len(corridor.control_points),
@@ -239,6 +239,8 @@ def _first_verified(planner, candidates: list, counts: dict, deadline, stage_ms,
             if checked is None:
                 continue
         answered = result(planner, candidate, checked, counts, with_total(stage_ms, begun))
+        if candidate.shaped.optimum:  # a draft for requests near it
+            planner.optima.add(answered.start_q, answered.goal_q, answered.trajectory)
         if keep:  # a transfer between port mouths, should one ask for it
             planner.keep(answered)
             for other in ordered[k + 1:]:  # the slower ones, not verified (``legs``)

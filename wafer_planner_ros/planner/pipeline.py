@@ -21,6 +21,7 @@ from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import candidates
 from wafer_planner_ros.planner.endpoints import Endpoint, endpoint, only_branch
 from wafer_planner_ros.planner.legs import leg_key, Legs
+from wafer_planner_ros.planner.optima import Optima
 from wafer_planner_ros.planner.result import PlanResult
 from wafer_planner_ros.planner.settings import PlannerSettings
 from wafer_planner_ros.planner.stop import divert, prepare, stop
@@ -39,6 +40,8 @@ class Planner:
         self.method = settings.method(cell, settings.timing, settings.shape)
         self.legs = Legs()
         """The transfers between port mouths planned so far, and the ways through ports."""
+        self._optima = {}
+        """Limit set -> its ``Optima``, shared by the planners of every set and method."""
         self._by_load = {cell.robot.load: self}
         self._by_method = {settings.method: self}
 
@@ -55,16 +58,39 @@ class Planner:
                                     f'unknown load {brief(load)}: one of {", ".join(LOADS)}')
             planner = Planner(self.cell.with_load(load), self.roadmap, self.settings)
             planner._by_load = self._by_load  # one planner per limit set, shared
+            planner._optima = self._optima
             self._by_load[load] = planner
         return self._by_load[load]
+
+    @property
+    def optima(self) -> Optima:
+        """
+        Return the optima of this limit set answered so far or handed over (``optima``).
+
+        Drafts for requests near them, one library per limit set for every curve method.
+        """
+        optima = self._optima.get(self.load)
+        return optima if optima is not None else self._optima.setdefault(self.load, Optima())
+
+    @property
+    def libraries(self) -> dict:
+        """Return every limit set's ``optima`` made so far, by limit set."""
+        return dict(self._optima)
 
     def with_method(self, method: Type[CurveMethod]) -> 'Planner':
         """Return the planner of this cell, roadmap and limit set with another curve method."""
         if method not in self._by_method:
             planner = Planner(self.cell, self.roadmap, replace(self.settings, method=method))
+            planner._optima = self._optima
             planner._by_method = self._by_method
             self._by_method[method] = planner
         return self._by_method[method]
+
+    def with_sample_period(self, period: float) -> 'Planner':
+        """Return a planner like this one sampling answers every ``period`` s (its optima)."""
+        planner = Planner(self.cell, self.roadmap, replace(self.settings, sample_period=period))
+        planner._optima = self._optima
+        return planner
 
     def endpoint(self, value, role: str) -> Endpoint:
         """Resolve a station name or joint angles on this cell (``endpoints.endpoint``)."""

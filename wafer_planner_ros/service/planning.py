@@ -99,8 +99,7 @@ class PlanningService:
         """Return the service with another budget and sample period, and the same tables."""
         planner = self.planner
         if planner.settings.sample_period != sample_period:
-            planner = Planner(planner.cell, planner.roadmap,
-                              replace(planner.settings, sample_period=sample_period))
+            planner = planner.with_sample_period(sample_period)
         return PlanningService(planner, budget=budget, tables=self.tables)
 
     def answer(self, start, goal, deadline: Optional[float] = None,

@@ -91,7 +91,7 @@ class PlanningProcess:
         """
         replies = self._child.exchange(lambda held: _held(held, key, planner))
         if replies and replies[-1][0] != 'held':
-            self._child.held.discard(key)  # not held: handed over again when needed
+            _forget(self._child.held, key)  # not held: handed over again when needed
             raise RuntimeError(f'the planning process failed: {replies[-1][1]}')
 
     def hold_ahead(self, key: int, planner: Planner,
@@ -127,15 +127,20 @@ class PlanningProcess:
         planner = service.planner
         head = ('plan', key, service.budget, planner.settings.sample_period)
         replies = self._child.exchange(
-            lambda held: _held(held, key, planner) + [head + request], wait)
+            lambda held: _held(held, key, planner) + _taught(held, key, planner)
+            + [head + request], wait)
         for reply in replies[:-1]:
             if reply[0] != 'held':
-                self._child.held.discard(key)  # not held: handed over again next time
+                _forget(self._child.held, key)  # not held: handed over again next time
                 raise RuntimeError(f'the planning process failed: {reply[1]}')
         reply = replies[-1]
         if reply[0] in ('planned', 'planning'):
-            for name, level, message in reply[-1]:  # what the child's planner said, said here
+            for name, level, message in reply[-2]:  # what the child's planner said, said here
                 logging.getLogger(name).log(level, '%s', message)
+            for load, optima in reply[-1]:  # what it learnt, kept here (and on disk)
+                for optimum in optima:
+                    planner.for_load(load).optima.add(optimum.start, optimum.goal,
+                                                      optimum.curve)
         if reply[0] == 'planned':
             return reply[1]
         if reply[0] == 'planning':
@@ -153,6 +158,37 @@ def _held(held: set, key: int, planner: Planner) -> list:
         return []
     held.add(key)
     return [('hold', key, planner.cell, planner.roadmap, planner.settings)]
+
+
+def _taught(held: set, key: int, planner: Planner) -> list:
+    """
+    Return the hand-over of the optima of ``planner`` the child under ``key`` lacks.
+
+    One message per limit set with optima kept since those last handed over (``held``
+    records the last serial handed over, and is emptied when another child starts).
+    """
+    messages = []
+    for load, optima in planner.libraries.items():
+        sent = next((serial for entry, serial in _sent(held, key, load)), 0)
+        new = optima.since(sent)
+        if new:
+            held.difference_update(_sent(held, key, load))
+            held.add((('optima', key, load), max(optimum.serial for optimum in new)))
+            messages.append(('optima', key, load, new))
+    return messages
+
+
+def _forget(held: set, key: int) -> None:
+    """Record that the child does not hold the roadmap under ``key``, nor its optima."""
+    held.discard(key)
+    held.difference_update([entry for entry in held if isinstance(entry, tuple)
+                            and entry[0][:2] == ('optima', key)])
+
+
+def _sent(held: set, key: int, load: str) -> list:
+    """Return the record of the optima of ``load`` handed over under ``key``, if any."""
+    return [entry for entry in held if isinstance(entry, tuple)
+            and entry[0] == ('optima', key, load)]
 
 
 class ProcessService:
@@ -212,14 +248,29 @@ class _Planning:
             for old in sorted(self.planners)[:-ROADMAPS]:
                 del self.planners[old]
             return ('held', key)
+        if message[0] == 'optima':  # optima the parent kept: drafts here too
+            _, key, load, optima = message
+            kept = self.planners[key].for_load(load).optima
+            for optimum in optima:
+                kept.add(optimum.start, optimum.goal, optimum.curve)
+            return ('held', key)
         _, key, budget, sample_period, kind, *arguments = message
-        service = PlanningService(self.planners[key]).using(budget, sample_period)
+        planner = self.planners[key]
+        before = {load: optima.serial for load, optima in planner.libraries.items()}
+        service = PlanningService(planner).using(budget, sample_period)
         self.said.records = []
         try:
             plan = service.answer if kind == 'answer' else service.divert
-            return ('planned', plan(*arguments), self.said.records)
+            return ('planned', plan(*arguments), self.said.records, _learnt(planner, before))
         except PlanningError as exc:
-            return ('planning', exc.code.name, exc.message, self.said.records)
+            return ('planning', exc.code.name, exc.message, self.said.records,
+                    _learnt(planner, before))
+
+
+def _learnt(planner: Planner, before: dict) -> list:
+    """Return [(limit set, optima kept since ``before``'s serial)] of ``planner``'s."""
+    return [(load, new) for load, optima in planner.libraries.items()
+            if (new := optima.since(before.get(load, 0)))]
 
 
 class _Said(logging.Handler):

@@ -60,6 +60,11 @@ def save_table(table, cache_dir) -> Path:
     document = {'key': table.key, 'version': __version__, 'format': FORMAT, 'load': table.load,
                 'digest': content_digest([entries, failures]), 'entries': entries,
                 'failures': failures, 'basis': table.basis, 'stations': table.stations}
+    return write_json(path, document)
+
+
+def write_json(path: Path, document) -> Path:
+    """Write ``document`` as JSON to ``path`` atomically (a temporary name, renamed)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=TMP_SUFFIX, dir=path.parent)
     try:

@@ -24,6 +24,7 @@ from wafer_planner_ros.trajectory.shape_problem import breaks_keep_outs
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
+from wafer_planner_ros.trajectory.warm import moved_to
 
 PLAIN_ROUNDS = 2
 """Rounds of the coarse stage under the port rule alone, where its start breaks a keep-out
@@ -55,6 +56,9 @@ class Shaped:
     fallback: Optional[Callable[[], 'Shaped']] = None
     """Makes what to return instead if this curve fails verification (the corridor curve),
     if anything: called only then."""
+    optimum: bool = False
+    """Whether the curve is an optimum worth starting nearby requests from, once verified
+    (``planner.optima``): the whole-curve optimisation's, not the corridor curve."""
 
 
 class CurveMethod(ABC):
@@ -69,8 +73,14 @@ class CurveMethod(ABC):
         self.shape = shape
 
     @abstractmethod
-    def draft(self, corridor: Corridor) -> Draft:
-        """Return the starting point for a corridor."""
+    def draft(self, corridor: Corridor, seed: Optional[CubicBSpline] = None) -> Draft:
+        """
+        Return the starting point for a corridor.
+
+        ``seed``: a verified optimum between configurations near the corridor's ends
+        (``planner.optima``), which a method may start from instead (not proven for these
+        ends: never returned as it is); None: none.
+        """
 
     @abstractmethod
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
@@ -111,8 +121,8 @@ class KnotTiming(CurveMethod):
 
     name = 'knot-timing'
 
-    def draft(self, corridor: Corridor) -> Draft:
-        """Return the λ-scaled uniform timing of the corridor's control points."""
+    def draft(self, corridor: Corridor, seed: Optional[CubicBSpline] = None) -> Draft:
+        """Return the λ-scaled uniform timing of the corridor's control points (no seed)."""
         problem = TimingProblem(corridor.control_points, self.cell.robot, self.settings)
         start = scaled_start(problem)
         return Draft(float(start[0].sum()), (problem, start))
@@ -164,20 +174,32 @@ class WholeCurve(KnotTiming):
     say where the fine stage started: from the coarse stage's proven curve
     (``coarse_cycle_time`` its cycle time), from its unproven optimum
     (``fine_from_unproven``), or else from the corridor curve.
+
+    Within a time budget, a ``seed`` (a verified optimum between configurations near the
+    ends: ``planner.optima``) is tried first: moved to the ends (``warm.moved_to``) and
+    optimised at the fine stage's spans until the budget; its fastest proven curve is the
+    answer (``from_optimum`` in the metrics). Only when it proves none by then, or shows
+    it cannot beat ``give_up_above``, is the corridor's way above taken. Without a budget
+    the seed is not used: the station table's curves do not depend on what was asked
+    before.
     """
 
     name = 'whole-curve'
 
-    def draft(self, corridor: Corridor) -> Draft:
-        """Return the corridor's λ-scaled start, keeping the corridor for ``finish``."""
+    def draft(self, corridor: Corridor, seed: Optional[CubicBSpline] = None) -> Draft:
+        """Return the corridor's λ-scaled start, keeping the corridor and seed for ``finish``."""
         start = super().draft(corridor)
-        return Draft(start.estimate, (start, corridor))
+        return Draft(start.estimate, (start, corridor, seed))
 
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
                until: Optional[float] = None,
                deadline: Optional[float] = None) -> Optional[Shaped]:
         """Return the fastest proven curve the whole-curve optimisation found (by ``until``)."""
-        start, corridor = draft.work
+        start, corridor, seed = draft.work
+        if seed is not None and until is not None:
+            warm = self._from_seed(seed, corridor, give_up_above, until)
+            if warm is not None:
+                return replace(warm, fallback=lambda: self._fallback(start))
         # A span per vertex of the path at least: a curve with fewer spans than the path
         # has corners cuts them, into the walls they go round, and is never proven.
         shape, spans = self.shape, max(self.shape.coarse_spans, len(corridor.path))
@@ -269,14 +291,36 @@ class WholeCurve(KnotTiming):
         if coarse.trajectory is not None:
             metrics['coarse_cycle_time'] = coarse.trajectory.duration
 
-        def fallback() -> Shaped:
-            corridor_curve = timed or super(WholeCurve, self).finish(start)
-            return replace(corridor_curve, warnings=corridor_curve.warnings + (
-                "the whole-curve optimisation's curve failed verification; returning the "
-                'corridor curve',))
-
         return Shaped(shaped.trajectory, start.estimate, metrics,
-                      (timed.warnings if timed else ()) + warnings, fallback)
+                      (timed.warnings if timed else ()) + warnings,
+                      lambda: self._fallback(start, timed), optimum=metrics['optimised'])
+
+    def _fallback(self, start: Draft, timed: Optional[Shaped] = None) -> Shaped:
+        """Return the corridor curve (``timed``, if already made), said to replace another."""
+        corridor_curve = timed or super().finish(start)
+        return replace(corridor_curve, warnings=corridor_curve.warnings + (
+            "the whole-curve optimisation's curve failed verification; returning the "
+            'corridor curve',))
+
+    def _from_seed(self, seed: CubicBSpline, corridor: Corridor,
+                   give_up_above: Optional[float], until: float) -> Optional[Shaped]:
+        """
+        Return the fastest curve proven by ``until`` from ``seed`` moved to the ends, or None.
+
+        None when none is proven by then (``finish`` then starts from the corridor) or the
+        optimisation shows it cannot beat ``give_up_above``.
+        """
+        points = corridor.control_points
+        start = moved_to(seed, points[0], points[-1], self.cell.robot, self.settings)
+        shape = replace(self.shape, min_spans=max(self.shape.min_spans, len(seed.intervals)))
+        shaped = optimise_shape(start, self.cell, shape, self.settings, give_up_above, until,
+                                proven=False, keep_out=False)
+        if shaped is None or shaped.trajectory is None:
+            return None
+        return Shaped(shaped.trajectory, start.duration,
+                      {'optimised': True, 'from_optimum': True,
+                       'shape_iterations': shaped.iterations, 'shape_rounds': shaped.rounds,
+                       'spans': shaped.spans}, optimum=True)
 
     def blend(self, transfer: CubicBSpline, ends, give_up_above: Optional[float] = None,
               until: Optional[float] = None, deadline: Optional[float] = None,
