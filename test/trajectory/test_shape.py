@@ -547,3 +547,32 @@ def test_a_budget_too_short_for_a_fine_stage_from_an_unproven_coarse_optimum_sti
     assert late.metrics['fine_from_unproven'] and not late.warnings
     assert late.verification.ok and late.verification.proof.certified
     assert late.cycle_time < 0.8 * corridor.cycle_time
+
+
+def test_within_a_budget_no_combination_runs_past_it_once_another_has_an_answer(
+        default_cell, default_roadmap, monkeypatch):
+    """
+    Anytime: with an answer in hand, a combination's optimisation ends at the budget.
+
+    Only while no combination has a proven curve may one run on past the budget (to its
+    first proven curve, up to half-way to the deadline); the others' optimisations, told
+    the best so far (``give_up_above``), stop at the budget, and the best proven curve by
+    then is the answer.
+    """
+    real, calls = methods.optimise_shape, []
+
+    def spied(start, cell, shape, timing, give_up_above=None, deadline=None, *args,
+              **options):
+        calls.append((give_up_above, deadline))
+        return real(start, cell, shape, timing, give_up_above, deadline, *args, **options)
+
+    monkeypatch.setattr(methods, 'optimise_shape', spied)
+    planner = Planner(default_cell, default_roadmap, PlannerSettings(method='whole-curve'))
+    budget, begun = 1.0, time.monotonic()  # long enough for several combinations
+    answer = planner.plan('loadport2', 'loadlock1', budget=budget,
+                          deadline=time.monotonic() + 30.0)
+    until = begun + budget
+    bounded = [deadline for best, deadline in calls if best is not None]
+    assert bounded, 'no combination was optimised with the best so far'
+    assert all(deadline is not None and deadline <= until + 0.01 for deadline in bounded)
+    assert answer.verification.ok and answer.verification.proof.certified

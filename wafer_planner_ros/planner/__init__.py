@@ -12,6 +12,7 @@ Where a change belongs:
 - ``through``: moves into and out of ports (the ways through the ports and the transfer
   between their mouths, stopping or blended).
 - ``legs``: what a planner keeps between requests (transfers, drafts, ways).
+- ``optima``: the optima it answered, by their ends: drafts for requests near them.
 - ``result``: ``PlanResult`` and ``answer``, the one place an answer is made.
 - ``settings``: ``PlannerSettings``. ``stages``: the timed stages and the deadline.
 

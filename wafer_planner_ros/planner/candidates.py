@@ -8,7 +8,9 @@ optimised when even its joints' fastest rest-to-rest motions
 optimisation shows it cannot win (the methods' ``give_up_above``), and unfinished once a
 time budget is spent and one is finished. Only the answer is verified, shortest first; one
 that fails falls back to the curve its method started from, then to the next combination,
-and when every finished one fails, those given up are finished after all.
+and when every finished one fails, those given up are finished after all. Each combination
+is drafted with the planner's kept optimum nearest its ends, if any (``optima``), and each
+verified answer the curve method calls an optimum is kept there.
 """
 
 from dataclasses import dataclass
@@ -75,7 +77,7 @@ def search(planner, a: Endpoint, b: Endpoint, deadline: Optional[float],
     (``legs``). Raise the first PlanningError met when no combination is answered.
     """
     stage_ms = stage_totals()
-    prepared, failure = _prepare_all(planner, a, b, deadline, stage_ms)
+    prepared, failure = _prepare_all(planner, a, b, deadline, stage_ms, until is not None)
     candidates, given_up = _finish_all(planner, prepared, deadline, until, stage_ms)
     while candidates:
         counts = {'candidates': len(prepared), 'given_up': len(given_up)}
@@ -90,8 +92,14 @@ def search(planner, a: Endpoint, b: Endpoint, deadline: Optional[float],
     raise failure
 
 
-def prepare(planner, a: Endpoint, b: Endpoint, qa, qb, branches, stage_ms) -> Prepared:
-    """Return the path, corridor and the method's draft between two configurations."""
+def prepare(planner, a: Endpoint, b: Endpoint, qa, qb, branches, stage_ms,
+            seeded: bool = False) -> Prepared:
+    """
+    Return the path, corridor and the method's draft between two configurations.
+
+    ``seeded``: drafted with the kept optimum nearest the two (within a time budget only:
+    without one, an answer never depends on what was asked before).
+    """
     model = planner.cell.motion_model  # the port margins too: the corridor keeps them
     lipschitz = model.lipschitz
     route = find_path(planner.roadmap, model, lipschitz, qa, qb)
@@ -109,7 +117,7 @@ def prepare(planner, a: Endpoint, b: Endpoint, qa, qb, branches, stage_ms) -> Pr
     corridor = build_corridor(path, model.body_clearance(path), lipschitz,
                               per_body=settings.per_body_boxes, extra=settings.extra_points)
     clock.lap('corridor')
-    draft = planner.method.draft(corridor, planner.optima.nearest(qa, qb))
+    draft = planner.method.draft(corridor, planner.optima.nearest(qa, qb) if seeded else None)
     clock.lap('spline')
     fastest = float(planner.cell.robot.limits.shortest_motion(qb - qa).max())
     return Prepared(a, b, qa, qb, branches, roadmap_path, path, len(corridor.control_points),
@@ -168,8 +176,9 @@ def drafted(planner, candidate: Candidate, counts: dict) -> Optional[PlanResult]
     return answered
 
 
-def _prepare_all(planner, a: Endpoint, b: Endpoint, deadline, stage_ms) -> tuple:
-    """Return every combination prepared, and the first reason one could not be."""
+def _prepare_all(planner, a: Endpoint, b: Endpoint, deadline, stage_ms,
+                 seeded: bool) -> tuple:
+    """Return every combination prepared (``prepare``), and the first reason one could not be."""
     prepared, failure = [], None
     for elbow_a, qa in a.configs:
         for elbow_b, qb in b.configs:
@@ -179,7 +188,8 @@ def _prepare_all(planner, a: Endpoint, b: Endpoint, deadline, stage_ms) -> tuple
                                     f'{qa.tolist()}')
             check_deadline(deadline)
             try:
-                prepared.append(prepare(planner, a, b, qa, qb, (elbow_a, elbow_b), stage_ms))
+                prepared.append(prepare(planner, a, b, qa, qb, (elbow_a, elbow_b), stage_ms,
+                                        seeded))
             except PlanningError as exc:
                 logger.debug('branches %s -> %s dropped: %s', elbow_a, elbow_b, exc)
                 failure = failure or exc

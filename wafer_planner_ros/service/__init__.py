@@ -5,7 +5,8 @@ Where a change belongs: how a request is answered (the station table first, a ti
 the curve method), ``planning``, used alike by the node, ``wafer-plan`` and
 ``wafer-replay``; reading a request, ``requests``; the node's parameters, ``settings``; the
 station table, ``table`` (its build order ``table_build``, its file ``table_store``, an
-entry and its validation ``table_entry``); a curve of one limit set answering another,
+entry and its validation ``table_entry``); the optima kept beside it, ``optima_store``; a
+curve of one limit set answering another,
 ``adoption``; the swap cycle through the ports, ``cycle``; messages as bytes, ``cdr`` and
 ``marker_cdr``; every kernel compiled before the first request, ``warmup``; the node's
 requests planned in a child process, ``planning_process``; the stops made ahead of a

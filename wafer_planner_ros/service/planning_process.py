@@ -20,9 +20,12 @@ holds the planners of the two latest roadmaps it was handed, each under the call
 request that needs it, and again to a child started after one ended. The child answers what
 its planner answers: proven and verified there (``Planner.plan``, ``Planner.divert``), its
 ``PlanningError`` raised here as it was raised there, and what its planner logs (warnings
-and errors) logged here, as if said here. A child that fails or ends fails the one request
-under way (RuntimeError); the next starts another. One that plans on ``STALLED_AFTER`` s
-past a request's deadline is ended.
+and errors) logged here, as if said here. The optima kept here (``Planner.optima``: the
+station table's curves, those read from the cache) are handed to the child with the next
+request that needs that roadmap (those it lacks only, ``_taught``), and those its answers
+add come back with each answer, kept here too (and so stored with the rest). A child that
+fails or ends fails the one request under way (RuntimeError); the next starts another. One
+that plans on ``STALLED_AFTER`` s past a request's deadline is ended.
 """
 
 import itertools

@@ -19,8 +19,10 @@ from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
 from wafer_planner_ros.trajectory.coarse import coarse_start
 from wafer_planner_ros.trajectory.corridor import Corridor
 from wafer_planner_ros.trajectory.curve import Trajectory
+from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape import optimise_shape, Shaping
 from wafer_planner_ros.trajectory.shape_problem import breaks_keep_outs
+from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
@@ -176,20 +178,30 @@ class WholeCurve(KnotTiming):
     (``fine_from_unproven``), or else from the corridor curve.
 
     Within a time budget, a ``seed`` (a verified optimum between configurations near the
-    ends: ``planner.optima``) is tried first: moved to the ends (``warm.moved_to``) and
-    optimised at the fine stage's spans until the budget; its fastest proven curve is the
-    answer (``from_optimum`` in the metrics). Only when it proves none by then, or shows
-    it cannot beat ``give_up_above``, is the corridor's way above taken. Without a budget
-    the seed is not used: the station table's curves do not depend on what was asked
-    before.
+    ends: ``planner.optima``) is tried first: moved to the ends (``warm.moved_to``),
+    proven where it lies (not assumed: its ends moved), and optimised at its own spans
+    until the budget; the fastest proven curve is the answer (``from_optimum`` in the
+    metrics), the moved seed itself where it is proven and nothing beats it. Only when it
+    proves none by then, or shows it cannot beat ``give_up_above``, is the corridor's way
+    above taken. Without a budget there is no seed: the station table's curves do not
+    depend on what was asked before. Within a budget, once another combination has an
+    answer (``give_up_above``), nothing runs on past the budget, and a combination whose
+    stages prove nothing by then is given up (anytime: the best proven curve by the
+    budget is the answer).
     """
 
     name = 'whole-curve'
 
     def draft(self, corridor: Corridor, seed: Optional[CubicBSpline] = None) -> Draft:
-        """Return the corridor's λ-scaled start, keeping the corridor and seed for ``finish``."""
+        """
+        Return the corridor's λ-scaled start, keeping the corridor and seed for ``finish``.
+
+        With a seed, its cycle time is the estimate where shorter: near the combination's
+        optimum, it is finished first and bounds the others (``give_up_above``).
+        """
         start = super().draft(corridor)
-        return Draft(start.estimate, (start, corridor, seed))
+        estimate = start.estimate if seed is None else min(start.estimate, seed.duration)
+        return Draft(estimate, (start, corridor, seed))
 
     def finish(self, draft: Draft, give_up_above: Optional[float] = None,
                until: Optional[float] = None,
@@ -205,6 +217,9 @@ class WholeCurve(KnotTiming):
         shape, spans = self.shape, max(self.shape.coarse_spans, len(corridor.path))
         fitted_start = coarse_start(corridor.control_points, spans, self.cell.robot,
                                     self.settings)
+        # On past the budget to a first proven curve while there is no answer at all; once
+        # another combination has one (``give_up_above``), the budget is the end: anytime.
+        past = until if give_up_above is not None else _past_budget(until, deadline)
         fine = replace(shape, min_spans=max(shape.min_spans,
                                             len(corridor.control_points) - DEGREE))
 
@@ -217,8 +232,7 @@ class WholeCurve(KnotTiming):
                                    clearance_samples=samples),
                 self.settings,
                 None if give_up_above is None else shape.coarse_give_up * give_up_above,
-                _past_budget(until, deadline), proven=False, first_proven=True,
-                keep_out=keep_out)
+                past, proven=False, first_proven=True, keep_out=keep_out)
 
         keep_out = _keeps_out(until, deadline)
         coarse = coarse_stage(keep_out)
@@ -261,15 +275,16 @@ class WholeCurve(KnotTiming):
             # the corridor curve, often twice as slow (seconds of motion, for tenths of
             # a second of planning; doc/benchmark.md).
             shaped = optimise_shape(coarse.unproven, self.cell, fine, self.settings,
-                                    give_up_above, _past_budget(until, deadline),
-                                    proven=False, first_proven=until is not None,
-                                    keep_out=keep_out)
+                                    give_up_above, past, proven=False,
+                                    first_proven=until is not None, keep_out=keep_out)
             if shaped is None:
                 return None  # its optimum is far slower than the best so far
             if shaped.trajectory is None:
                 shaped = None  # nothing proven: from the corridor curve, then
             else:
                 fitted = True
+        if not fitted and until is not None and give_up_above is not None:
+            return None  # nothing proven by the budget, and another combination has an answer
         timed = None if fitted else super().finish(start, deadline=deadline)
         begin = coarse.trajectory if coarse.trajectory is not None else \
             shaped.trajectory if shaped is not None else timed.trajectory
@@ -310,11 +325,16 @@ class WholeCurve(KnotTiming):
         None when none is proven by then (``finish`` then starts from the corridor) or the
         optimisation shows it cannot beat ``give_up_above``.
         """
-        points = corridor.control_points
+        points, model = corridor.control_points, self.cell.motion_model
         start = moved_to(seed, points[0], points[-1], self.cell.robot, self.settings)
         shape = replace(self.shape, min_spans=max(self.shape.min_spans, len(seed.intervals)))
+        # Proven where it lies (a few ms), it is what the optimisation must beat: its
+        # first solves, with the default wafer samples, may end a little slower once
+        # scaled to the limit between them.
+        with timed('optimise.proof'):
+            proven = prove(start, model, model.lipschitz).certified
         shaped = optimise_shape(start, self.cell, shape, self.settings, give_up_above, until,
-                                proven=False, keep_out=False)
+                                proven=proven, keep_out=False)
         if shaped is None or shaped.trajectory is None:
             return None
         return Shaped(shaped.trajectory, start.duration,
