@@ -124,3 +124,27 @@ def test_a_roadmap_the_child_could_not_take_is_handed_over_again(process, planne
     service = process.service(key, PlanningService(planner))
     assert service.answer('loadport1', 'loadlock2').verification.ok
     assert process.started == 1  # the same child throughout
+
+
+def test_the_child_keeps_its_answers_as_optima_stores_them_and_reads_them_back(
+        process, default_cell, default_roadmap, tmp_path):
+    fresh = Planner(default_cell, default_roadmap)  # the node's: knot-timing by default
+    start, goal = np.array([-1.2, 2.4, 1.3]), np.array([1.0, -2.0, -1.0])
+    key = process.key()
+    budgeted = process.service(key, PlanningService(fresh, budget=0.12))
+    first = budgeted.answer(start, goal)
+    assert first.metrics.get('from_optimum') is not True
+    assert not len(fresh.optima)  # learnt in the child, not here
+    stored = process.store_optima(key, fresh, tmp_path)
+    assert [load for load, _ in stored] == ['loaded']
+    # Another roadmap key (a new child planner, nothing kept): read back, verified a few
+    # at a time, and the request near the first starts from it.
+    other = process.key()
+    read = process.read_optima(other, fresh, tmp_path)
+    assert read[0][0] == 'loaded' and read[0][1] == stored[0][1] and read[0][2] == 1
+    assert read[1][0] == 'empty' and 'no optima file' in read[1][1]
+    done, left = process.verify_optima(other, fresh, 4)
+    assert done == [('loaded', 1, [])] and left == 0
+    near = process.service(other, PlanningService(fresh, budget=0.12)).answer(
+        start + 0.03, goal - 0.03)
+    assert near.metrics.get('from_optimum') is True and near.verification.ok

@@ -37,7 +37,7 @@ from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import Loaded, NodeRecording
 from wafer_planner_ros.node.serving import build_station_tables, learn_tables
 from wafer_planner_ros.node.serving import load_optima_files, load_station_tables
-from wafer_planner_ros.node.serving import progress_reporter, save_optima_files, Serving
+from wafer_planner_ros.node.serving import progress_reporter, Serving, store_optima_files
 from wafer_planner_ros.node.serving import table_to_plan
 from wafer_planner_ros.node.startup import kernels_ready, since_process_start
 from wafer_planner_ros.planner import Planner, PlannerSettings
@@ -250,7 +250,8 @@ class RoadmapLoader:
         except Exception as exc:  # noqa: B902 - the roadmap serves without its picture
             self._logger.error(f'roadmap markers not published: {reason_of(exc)}')
         try:
-            load_optima_files(planner, settings, self._logger)
+            load_optima_files(self._planning, key, planner, settings, self._logger,
+                              self._table_stopped)
         except Exception as exc:  # noqa: B902 - only requests near them are slower
             self._logger.error(f'optima not loaded: {reason_of(exc)}')
         if not table_to_plan(planner, tables, settings):
@@ -266,7 +267,10 @@ class RoadmapLoader:
                                  self._table_stopped)
         except Exception as exc:  # noqa: B902 - the roadmap serves without its table
             self._logger.error(f'station table not planned: {reason_of(exc)}')
-        save_optima_files(planner, settings, self._logger)
+        try:
+            store_optima_files(self._planning, key, planner, settings, self._logger)
+        except Exception as exc:  # noqa: B902 - only requests near them are slower
+            self._logger.error(f'optima not stored: {reason_of(exc)}')
         self.enter(Phase.LOADING)  # the table planned: the load ends
 
     def _kernels_compiling(self) -> None:

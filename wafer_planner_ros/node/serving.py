@@ -12,22 +12,27 @@ meanwhile: ``service.planning_process``). What the tables lack of what they are 
 empty, then the port pairs loaded and empty), or rejected, is planned then, group by group
 (``build_station_tables``; ``table_to_plan`` says whether), the table stored and handed to
 the service as each pair is planned: each pair is answered from the table a second or two
-after the one before. How a request is answered is the service's to say.
+after the one before. How a request is answered is the service's to say. The tables'
+curves are handed to the planning process as optima (``learn_tables``), which reads,
+verifies and stores the optima files (``load_optima_files``, ``store_optima_files``).
 """
 
 from dataclasses import dataclass
 import time
 from typing import Callable, Dict, Optional
 
-from wafer_planner_ros.cell.limits import EMPTY, LOADED, LOADS
+from wafer_planner_ros.cell.limits import EMPTY, LOADED
 from wafer_planner_ros.cell.stations import station_pairs
 from wafer_planner_ros.planner import Planner
 from wafer_planner_ros.roadmap.cache import CachedRoadmap
-from wafer_planner_ros.service.optima_store import learn_table, load_optima, OptimaError
-from wafer_planner_ros.service.optima_store import save_optima
+from wafer_planner_ros.service.optima_store import learn_table
 from wafer_planner_ros.service.planning import PlanningService, whole_curve
 from wafer_planner_ros.service.table import build_and_store_table, lacking, load_table
 from wafer_planner_ros.service.table import port_pairs, StationTable, TableError
+
+
+OPTIMA_VERIFIED_AT_ONCE = 4
+"""Optima of the cached files the planning process verifies in one go (a few ms each)."""
 
 
 @dataclass(frozen=True)
@@ -99,26 +104,37 @@ def load_station_tables(planner: Planner, settings, logger) -> Dict[str, Station
     return tables
 
 
-def load_optima_files(planner: Planner, settings, logger) -> None:
+def load_optima_files(planning, key: int, planner: Planner, settings, logger,
+                      stopped: Callable[[], bool] = lambda: False) -> None:
     """
-    Keep the optima of the cached files and the station tables' curves in ``planner``'s.
+    Have the planning process read and verify the cached optima of the roadmap under ``key``.
 
-    Of every limit set a request may ask for (``optima_store``): each optimum read back is
-    verified in full, those that fail left out and said; a file that cannot be used is
-    said and passed over (only requests near its optima are slower).
+    Of every limit set (``optima_store``), in the planning process: read, then verified in
+    full there ``OPTIMA_VERIFIED_AT_ONCE`` at a time (a request waits for no more than
+    those); those that fail are left out and said here; a file that cannot be used is
+    said and passed over (only requests near its optima are slower). ``stopped()`` True
+    (a rebuild, the node stopping) ends it between two goes.
     """
-    for load in LOADS:
-        target = whole_curve(planner).for_load(load)
-        if settings.cache_dir is not None:
-            try:
-                loaded = load_optima(target, settings.cache_dir)
-            except OptimaError as exc:
-                logger.info(f'optima ({load}): {exc}')
-            else:
-                for reason in loaded.rejected:
-                    logger.warning(f'optima ({load}): {reason}; left out')
-                logger.info(f'optima ({load}): {loaded.kept} kept, each verified, in '
-                            f'{loaded.seconds:.2f} s')
+    if settings.cache_dir is None:
+        return
+    begun = time.monotonic()
+    found = {}
+    for load, path, count in planning.read_optima(key, planner, settings.cache_dir):
+        if isinstance(path, str):
+            logger.info(f'optima ({load}): {path}')
+        else:
+            found[load] = [path, count, 0]
+    left = sum(count for _, count, _ in found.values())
+    while left and not stopped():
+        done, left = planning.verify_optima(key, planner, OPTIMA_VERIFIED_AT_ONCE)
+        for load, kept, rejected in done:
+            found[load][2] += kept
+            for reason in rejected:
+                logger.warning(f'optima ({load}): {reason}; left out')
+        time.sleep(0.001)  # a request waiting for the planning process goes first
+    for load, (path, count, kept) in found.items():
+        logger.info(f'optima ({load}): {kept} of {count} kept from {path.name}, each '
+                    f'verified ({time.monotonic() - begun:.2f} s)')
 
 
 def learn_tables(planner: Planner, tables: Dict[str, StationTable]) -> None:
@@ -127,16 +143,23 @@ def learn_tables(planner: Planner, tables: Dict[str, StationTable]) -> None:
         learn_table(whole_curve(planner).for_load(load), table)
 
 
-def save_optima_files(planner: Planner, settings, logger) -> None:
-    """Store ``planner``'s optima of every limit set it has any of (with a cache directory)."""
+def store_optima_files(planning, key: int, planner: Planner, settings, logger,
+                       turn: Optional[float] = None) -> None:
+    """
+    Have the planning process store the optima it keeps of the roadmap under ``key``.
+
+    (``PlanningProcess.store_optima``; with a cache directory.) ``turn``: seconds to wait
+    for a plan under way to end; not stored when it has not (said).
+    """
     if settings.cache_dir is None:
         return
-    for load, optima in planner.libraries.items():
-        if len(optima):
-            try:
-                save_optima(whole_curve(planner).for_load(load), settings.cache_dir)
-            except OSError as exc:
-                logger.warning(f'optima ({load}) not stored: {exc}')
+    stored = planning.store_optima(key, planner, settings.cache_dir, turn)
+    if stored is None:
+        logger.info('optima not stored: a plan was under way')
+        return
+    for load, path in stored:
+        if isinstance(path, str):
+            logger.warning(f'optima ({load}) not stored: {path}')
 
 
 def table_to_plan(planner: Planner, tables: Dict[str, StationTable], settings) -> bool:

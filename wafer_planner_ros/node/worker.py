@@ -38,7 +38,7 @@ from wafer_planner_ros.node.faults import reason_of, SafeLogger
 from wafer_planner_ros.node.loader import Phase, RoadmapLoader
 from wafer_planner_ros.node.messages import Sent
 from wafer_planner_ros.node.recording import NodeRecording
-from wafer_planner_ros.node.serving import save_optima_files, Serving, table_counts
+from wafer_planner_ros.node.serving import Serving, store_optima_files, table_counts
 from wafer_planner_ros.node.stops import Stops
 from wafer_planner_ros.service.planning_process import PlanningProcess
 from wafer_planner_ros.service.requests import Moving
@@ -50,7 +50,10 @@ not yet queued (the executor hands them over within milliseconds)."""
 NOT_LOADED = 'the roadmap is being loaded or built'
 OPTIMA_STORED_EVERY = 60.0
 """s: the optima learnt from the answers (``planner.optima``) are stored at most this often
-after an answer, and when the node stops."""
+after an answer (by the planning process: tens of ms), and when the node stops."""
+OPTIMA_STOP_TURN = 0.05
+"""s: at stop, how long a plan under way is waited for before the optima are stored (else
+they are not, and those learnt since the last time are lost: only speed)."""
 
 
 class PlanningWorker:
@@ -89,8 +92,10 @@ class PlanningWorker:
         """Numbers of the queries being planned (not waiting)."""
         self.counts = {'served': 0, 'failed': 0}
         self.last_error = ''
-        self._optima_stored = (time.monotonic(), None)
-        """When the optima were last stored, and what was stored (``_store_optima``)."""
+        self._optima_stored = time.monotonic()
+        """When the planning process last stored its optima (``_store_optima``)."""
+        self._answered = False
+        """Whether a request was planned since (and so the optima may have grown)."""
         self.planning = PlanningProcess()
         """The child process planning what the station table does not hold."""
         try:
@@ -240,26 +245,25 @@ class PlanningWorker:
         for thread in self._threads + [self._loader.thread]:
             thread.join(max(0.0, deadline - time.monotonic()))
         self.stops.join(max(0.0, deadline - time.monotonic()))
-        self.planning.close()
         serving = self._loader.serving
-        if serving is not None:
-            self._store_optima(serving, self._settings(), at_once=True)
+        if serving is not None and self._answered:
+            self._store_optima(serving, self._settings(), turn=OPTIMA_STOP_TURN)
+        self.planning.close()
 
-    def _store_optima(self, serving: Serving, settings, at_once: bool = False) -> None:
+    def _store_optima(self, serving: Serving, settings, turn: Optional[float] = None) -> None:
         """
-        Store the optima the serving planner learnt, if any since the last time.
+        Have the planning process store the optima it learnt (``serving.store_optima_files``).
 
-        Not within ``OPTIMA_STORED_EVERY`` s of the last time, unless ``at_once``.
+        After an answer (``turn`` None): not within ``OPTIMA_STORED_EVERY`` s of the last
+        time. ``turn``: at once, unless a plan under way has not ended within ``turn`` s.
         """
-        last, stored = self._optima_stored
         now = time.monotonic()
-        learnt = (id(serving), tuple((load, optima.serial) for load, optima in
-                                     serving.planner.libraries.items()))
-        if learnt == stored or not at_once and now - last < OPTIMA_STORED_EVERY:
+        if turn is None and now - self._optima_stored < OPTIMA_STORED_EVERY:
             return
-        self._optima_stored = (now, learnt)
+        self._optima_stored, self._answered = now, False
         try:
-            save_optima_files(serving.planner, settings, self._logger)
+            store_optima_files(self.planning, serving.key, serving.planner, settings,
+                               self._logger, turn)
         except Exception as exc:  # noqa: B902 - only requests near them are slower
             self._logger.error(f'optima not stored: {reason_of(exc)}')
 
@@ -411,6 +415,7 @@ class PlanningWorker:
             self._logger.error(f'request {request.request_id}: no path markers: {reason_of(exc)}')
             return
         self._send((Sent.PATH, path, number))
+        self._answered = True
         self._store_optima(serving, settings)
 
     def _answer_error(self, number: int, request, code, message: str, planning_ms=None,

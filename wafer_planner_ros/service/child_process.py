@@ -46,17 +46,24 @@ class ChildProcess:
         """Children started so far."""
 
     def exchange(self, messages: Callable[[set], Sequence[tuple]],
-                 wait: Optional[float] = None) -> List[tuple]:
+                 wait: Optional[float] = None,
+                 turn: Optional[float] = None) -> Optional[List[tuple]]:
         """
         Send ``messages(held)`` (started first if need be) and return their replies in order.
 
         ``messages`` is called once the child runs, with the keys it holds (it adds those
         its messages hand over). ``wait``: seconds for all the replies (default: the
-        child's). Raises RuntimeError once the child fails, ends or does not reply in time
-        (it is ended then: the next exchange starts another).
+        child's). ``turn``: seconds to wait for another caller's exchange to end (default:
+        as long as it takes); None is returned, nothing sent, when it has not by then.
+        Raises RuntimeError once the child fails, ends or does not reply in time (it is
+        ended then: the next exchange starts another).
         """
-        with self._lock:
+        if not self._lock.acquire(timeout=-1 if turn is None else turn):
+            return None
+        try:
             return self._exchange(messages, self.wait if wait is None else wait)
+        finally:
+            self._lock.release()
 
     def _exchange(self, messages: Callable[[set], Sequence[tuple]], wait: float) -> List[tuple]:
         try:

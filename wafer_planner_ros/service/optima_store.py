@@ -75,15 +75,26 @@ def load_optima(planner, cache_dir) -> LoadedOptima:
     """
     Keep in ``planner.optima`` every optimum of its file that passes verification.
 
-    Return how many were kept and why the others were not (and from which file). Without
-    a file of its own key, the newest file of the same ``table.table_basis`` (the cell but
-    its stations, the settings, the limit set, the version: a station re-taught, or
-    another roadmap) is read instead: its optima are verified against this cell all the
+    ``read_optima``, then ``keep_verified`` of all it read. Return how many were kept and
+    why the others were not (and from which file). Raise OptimaError as ``read_optima``.
+    """
+    begun = time.perf_counter()
+    path, optima = read_optima(planner, cache_dir)
+    kept, rejected = keep_verified(planner, list(enumerate(optima)))
+    return LoadedOptima(kept, tuple(rejected), time.perf_counter() - begun, path)
+
+
+def read_optima(planner, cache_dir) -> Tuple[Path, list]:
+    """
+    Return (the file read, its optima as stored, none verified yet) for ``planner``.
+
+    Its own key's file; without one, the newest file of the same ``table.table_basis``
+    (the cell but its stations, the settings, the limit set, the version: a station
+    re-taught, or another roadmap), whose optima are verified against this cell all the
     same, and those near a re-taught station's old pose start its requests near their
     optimum. Raise OptimaError when there is neither, or the file is unreadable, for
     another key or format, or not matching its digest.
     """
-    begun = time.perf_counter()
     key = table_key(planner)
     path = optima_path(cache_dir, key)
     try:
@@ -96,10 +107,19 @@ def load_optima(planner, cache_dir) -> LoadedOptima:
             document = None
         if document is None:
             raise OptimaError(f'no optima file {optima_path(cache_dir, key)}') from None
+    return path, document['optima']
+
+
+def keep_verified(planner, optima: list) -> Tuple[int, list]:
+    """
+    Keep in ``planner.optima`` each of ``optima`` ([(place in its file, as stored)]) that passes.
+
+    Each is verified in full from its two ends (``verify``). Return (how many were kept,
+    why each other was not: 'optimum K: the reason').
+    """
     kept, rejected = 0, []
-    optima = document['optima']
     joints = len(planner.cell.robot.joint_names)
-    for k, stored in enumerate(optima):
+    for k, stored in optima:
         try:
             start, goal, curve = _read(stored, joints)
             checked = verify(curve, planner.cell, start, goal)
@@ -110,7 +130,7 @@ def load_optima(planner, cache_dir) -> LoadedOptima:
             rejected.append(f'optimum {k}: ' + '; '.join(checked.problems))
         elif planner.optima.add(start, goal, curve):
             kept += 1
-    return LoadedOptima(kept, tuple(rejected), time.perf_counter() - begun, path)
+    return kept, rejected
 
 
 def _read_file(path: Path, key) -> dict:

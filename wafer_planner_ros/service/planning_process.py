@@ -20,10 +20,12 @@ holds the planners of the two latest roadmaps it was handed, each under the call
 request that needs it, and again to a child started after one ended. The child answers what
 its planner answers: proven and verified there (``Planner.plan``, ``Planner.divert``), its
 ``PlanningError`` raised here as it was raised there, and what its planner logs (warnings
-and errors) logged here, as if said here. The optima kept here (``Planner.optima``: the
-station table's curves, those read from the cache) are handed to the child with the next
-request that needs that roadmap (those it lacks only, ``_taught``), and those its answers
-add come back with each answer, kept here too (and so stored with the rest). A child that
+and errors) logged here, as if said here. The child keeps the optima of its answers
+(``Planner.optima``); those kept here (the station tables' curves) are handed to it with
+the next exchange on that roadmap (those it lacks only, ``_taught``); it reads, verifies (a
+few at a time: a request waits for no more) and stores the optima files
+(``read_optima``, ``verify_optima``, ``store_optima``: ``optima_store``), so that neither
+their verification nor their JSON holds this process's interpreter lock. A child that
 fails or ends fails the one request under way (RuntimeError); the next starts another. One
 that plans on ``STALLED_AFTER`` s past a request's deadline is ended.
 """
@@ -36,12 +38,14 @@ import time
 from typing import Callable, Optional
 
 from wafer_planner_ros import giving_way
-from wafer_planner_ros.cell.limits import LOADED
+from wafer_planner_ros.cell.limits import LOADED, LOADS
 from wafer_planner_ros.errors import ErrorCode, PlanningError
 from wafer_planner_ros.planner import Planner, PlanResult
 from wafer_planner_ros.roadmap.graph import import_for_searches
 from wafer_planner_ros.service.child_process import ChildProcess, load_kernels, run_child
-from wafer_planner_ros.service.planning import PlanningService
+from wafer_planner_ros.service.optima_store import keep_verified, OptimaError, read_optima
+from wafer_planner_ros.service.optima_store import save_optima
+from wafer_planner_ros.service.planning import PlanningService, whole_curve
 
 PACKAGE = 'wafer_planner_ros'
 """The logger whose warnings and errors (its modules') the child hands back."""
@@ -138,17 +142,55 @@ class PlanningProcess:
                 raise RuntimeError(f'the planning process failed: {reply[1]}')
         reply = replies[-1]
         if reply[0] in ('planned', 'planning'):
-            for name, level, message in reply[-2]:  # what the child's planner said, said here
+            for name, level, message in reply[-1]:  # what the child's planner said, said here
                 logging.getLogger(name).log(level, '%s', message)
-            for load, optima in reply[-1]:  # what it learnt, kept here (and on disk)
-                for optimum in optima:
-                    planner.for_load(load).optima.add(optimum.start, optimum.goal,
-                                                      optimum.curve)
         if reply[0] == 'planned':
             return reply[1]
         if reply[0] == 'planning':
             raise PlanningError(ErrorCode[reply[1]], reply[2])
         raise RuntimeError(f'the planning process failed: {reply[1]}')
+
+    def read_optima(self, key: int, planner: Planner, cache_dir) -> list:
+        """
+        Have the child read the optima files of the roadmap under ``key`` (``optima_store``).
+
+        Of every limit set; none verified yet (``verify_optima``), none used before. Return
+        [(limit set, the file read or why none was, optima read)]. Raise RuntimeError when
+        the child fails or ends.
+        """
+        return self._optima(key, planner, ('read_optima', key, str(cache_dir)))
+
+    def verify_optima(self, key: int, planner: Planner, count: int) -> tuple:
+        """
+        Have the child verify ``count`` more of the optima it read, and keep those that pass.
+
+        A few at a time, so that a request waits for no more than those (a few ms each).
+        Return ([(limit set, kept, [why each other was not])], how many are left).
+        """
+        return self._optima(key, planner, ('verify_optima', key, count))
+
+    def store_optima(self, key: int, planner: Planner, cache_dir,
+                     turn: Optional[float] = None) -> Optional[list]:
+        """
+        Have the child store the optima it keeps of the roadmap under ``key``.
+
+        Those of ``planner`` it lacks first. Return [(limit set, the file's path or why it
+        was not stored)]; None when a plan under way has not ended within ``turn`` s.
+        Raise RuntimeError when the child fails or ends.
+        """
+        return self._optima(key, planner, ('store_optima', key, str(cache_dir)), turn)
+
+    def _optima(self, key: int, planner: Planner, message: tuple,
+                turn: Optional[float] = None) -> Optional[list]:
+        """Return the child's reply to an optima ``message`` on the roadmap under ``key``."""
+        replies = self._child.exchange(lambda held: _held(held, key, planner)
+                                       + _taught(held, key, planner) + [message], turn=turn)
+        if replies is None:
+            return None
+        if replies[-1][0] != 'optima':
+            _forget(self._child.held, key)
+            raise RuntimeError(f'the planning process failed: {replies[-1][1]}')
+        return replies[-1][1]
 
     def close(self) -> None:
         """End the child at once (nothing waits for a plan any more)."""
@@ -234,6 +276,8 @@ class _Planning:
     def __init__(self):
         self.planners = {}
         """key -> the planner of a roadmap handed over, the latest ``ROADMAPS``."""
+        self.unverified = {}
+        """key -> the optima read from its files not yet verified (``verify_optima``)."""
         self.loaded = False
         self.said = _Said()
         logging.getLogger(PACKAGE).addHandler(self.said)
@@ -250,6 +294,7 @@ class _Planning:
                 getattr(roadmap, built)  # what the first search builds: built now
             for old in sorted(self.planners)[:-ROADMAPS]:
                 del self.planners[old]
+                self.unverified.pop(old, None)
             return ('held', key)
         if message[0] == 'optima':  # optima the parent kept: drafts here too
             _, key, load, optima = message
@@ -257,23 +302,68 @@ class _Planning:
             for optimum in optima:
                 kept.add(optimum.start, optimum.goal, optimum.curve)
             return ('held', key)
+        if message[0] == 'read_optima':
+            _, key, cache_dir = message
+            read, self.unverified[key] = _read(self.planners[key], cache_dir)
+            return ('optima', read)
+        if message[0] == 'verify_optima':
+            _, key, count = message
+            unverified = self.unverified.get(key, [])
+            taken, self.unverified[key] = unverified[:count], unverified[count:]
+            return ('optima', (_verified(self.planners[key], taken),
+                               len(self.unverified[key])))
+        if message[0] == 'store_optima':
+            _, key, cache_dir = message
+            return ('optima', _stored(self.planners[key], cache_dir))
         _, key, budget, sample_period, kind, *arguments = message
-        planner = self.planners[key]
-        before = {load: optima.serial for load, optima in planner.libraries.items()}
-        service = PlanningService(planner).using(budget, sample_period)
+        service = PlanningService(self.planners[key]).using(budget, sample_period)
         self.said.records = []
         try:
             plan = service.answer if kind == 'answer' else service.divert
-            return ('planned', plan(*arguments), self.said.records, _learnt(planner, before))
+            return ('planned', plan(*arguments), self.said.records)
         except PlanningError as exc:
-            return ('planning', exc.code.name, exc.message, self.said.records,
-                    _learnt(planner, before))
+            return ('planning', exc.code.name, exc.message, self.said.records)
 
 
-def _learnt(planner: Planner, before: dict) -> list:
-    """Return [(limit set, optima kept since ``before``'s serial)] of ``planner``'s."""
-    return [(load, new) for load, optima in planner.libraries.items()
-            if (new := optima.since(before.get(load, 0)))]
+def _read(planner: Planner, cache_dir) -> tuple:
+    """
+    Return what reading every limit set's optima file found, and the optima to verify.
+
+    ([(limit set, path or why none, count)], [(limit set, place in its file, as stored)]).
+    """
+    read, unverified = [], []
+    for load in LOADS:
+        try:
+            path, optima = read_optima(whole_curve(planner).for_load(load), cache_dir)
+        except OptimaError as exc:
+            read.append((load, str(exc), 0))
+            continue
+        read.append((load, path, len(optima)))
+        unverified += [(load, k, stored) for k, stored in enumerate(optima)]
+    return read, unverified
+
+
+def _verified(planner: Planner, taken: list) -> list:
+    """Return [(limit set, kept, [why not])] of verifying and keeping ``taken`` optima."""
+    done = []
+    for load in dict.fromkeys(load for load, _, _ in taken):
+        kept, rejected = keep_verified(whole_curve(planner).for_load(load), [
+            (k, stored) for of, k, stored in taken if of == load])
+        done.append((load, kept, rejected))
+    return done
+
+
+def _stored(planner: Planner, cache_dir) -> list:
+    """Return [(limit set, path or why not)] of storing every limit set's optima kept."""
+    stored = []
+    for load, optima in planner.libraries.items():
+        if len(optima):
+            try:
+                stored.append((load, save_optima(whole_curve(planner).for_load(load),
+                                                 cache_dir)))
+            except OSError as exc:
+                stored.append((load, str(exc)))
+    return stored
 
 
 class _Said(logging.Handler):
