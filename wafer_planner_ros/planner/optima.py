@@ -4,11 +4,13 @@ A planner's library of optima: the curves it answered, drafts for the requests n
 Every verified answer between two configurations at rest that the whole-curve optimisation
 made (``candidates``), and every station table entry handed to it (``service``), is kept
 by its ends, the last ``OPTIMA_KEPT`` of them, the fastest for the same ends. A request
-whose two ends lie within ``REACH`` of a kept optimum's (on every joint; the optimum run
-backwards counts too: the same limits hold on it) starts its optimisation from that curve,
-moved to its ends (``trajectory.warm``), instead of from the corridor: near the optimum,
-it is proven in a round or two. A kept curve is never an answer: it is a draft,
-optimised, proven and verified for the request. Safe to share between threads.
+planned within a time budget whose two ends lie within ``REACH`` of a kept optimum's (on
+every joint; the optimum run backwards counts too: the same limits hold on it) starts its
+optimisation from that curve, moved to its ends (``trajectory.warm``), instead of from
+the corridor: near the optimum, it is proven in a round or two. A kept curve is never
+trusted: it is a draft, moved to the request's ends, proven there (else not a start to
+return) and optimised; the answer, that draft only where nothing found beats it, is
+verified for the request like any. Safe to share between threads.
 """
 
 from dataclasses import dataclass
