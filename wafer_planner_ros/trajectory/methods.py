@@ -15,6 +15,7 @@ import math
 import time
 from typing import Callable, ClassVar, Mapping, Optional, Tuple
 
+from wafer_planner_ros.trajectory import stopwatch
 from wafer_planner_ros.trajectory.bspline import CubicBSpline, DEGREE
 from wafer_planner_ros.trajectory.coarse import coarse_start
 from wafer_planner_ros.trajectory.corridor import Corridor
@@ -22,7 +23,6 @@ from wafer_planner_ros.trajectory.curve import Trajectory
 from wafer_planner_ros.trajectory.proof import prove
 from wafer_planner_ros.trajectory.shape import optimise_shape, Shaping
 from wafer_planner_ros.trajectory.shape_problem import breaks_keep_outs
-from wafer_planner_ros.trajectory.stopwatch import timed
 from wafer_planner_ros.trajectory.timing import optimise
 from wafer_planner_ros.trajectory.timing_problem import scaled_start, TimingProblem
 from wafer_planner_ros.trajectory.tuning import ShapeSettings, TimingSettings
@@ -331,7 +331,7 @@ class WholeCurve(KnotTiming):
         # Proven where it lies (a few ms), it is what the optimisation must beat: its
         # first solves, with the default wafer samples, may end a little slower once
         # scaled to the limit between them.
-        with timed('optimise.proof'):
+        with stopwatch.timed('optimise.proof'):
             proven = prove(start, model, model.lipschitz).certified
         shaped = optimise_shape(start, self.cell, shape, self.settings, give_up_above, until,
                                 proven=proven, keep_out=False)
