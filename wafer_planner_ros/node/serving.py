@@ -133,8 +133,8 @@ def load_optima_files(planning, key: int, planner: Planner, settings, logger,
                 logger.warning(f'optima ({load}): {reason}; left out')
         time.sleep(0.001)  # a request waiting for the planning process goes first
     for load, (path, count, kept) in found.items():
-        logger.info(f'optima ({load}): {kept} of {count} kept from {path.name}, each '
-                    f'verified ({time.monotonic() - begun:.2f} s)')
+        logger.info(f'optima ({load}): {kept} of {count} in {path.name} passed verification'
+                    f' and are kept ({time.monotonic() - begun:.2f} s)')
 
 
 def learn_tables(planner: Planner, tables: Dict[str, StationTable]) -> None:

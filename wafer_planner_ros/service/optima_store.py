@@ -48,7 +48,7 @@ class LoadedOptima(NamedTuple):
     """What ``load_optima`` kept of a file."""
 
     kept: int
-    """Optima verified and kept (as drafts)."""
+    """Optima that passed verification, kept as drafts (or as fast a curve was already)."""
     rejected: Tuple[str, ...]
     """Why each left out was: its place in the file and the reason."""
     seconds: float
@@ -114,8 +114,9 @@ def keep_verified(planner, optima: list) -> Tuple[int, list]:
     """
     Keep in ``planner.optima`` each of ``optima`` ([(place in its file, as stored)]) that passes.
 
-    Each is verified in full from its two ends (``verify``). Return (how many were kept,
-    why each other was not: 'optimum K: the reason').
+    Each is verified in full from its two ends (``verify``). Return (how many passed, kept
+    or as fast a curve already kept for the same ends; why each other did not:
+    'optimum K: the reason').
     """
     kept, rejected = 0, []
     joints = len(planner.cell.robot.joint_names)
@@ -128,7 +129,8 @@ def keep_verified(planner, optima: list) -> Tuple[int, list]:
             continue
         if not checked.ok:
             rejected.append(f'optimum {k}: ' + '; '.join(checked.problems))
-        elif planner.optima.add(start, goal, curve):
+        else:
+            planner.optima.add(start, goal, curve)
             kept += 1
     return kept, rejected
 
