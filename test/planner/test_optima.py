@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wafer_planner_ros.planner import Planner
-from wafer_planner_ros.planner.optima import Optima, REACH
+from wafer_planner_ros.planner.optima import Optima, OPTIMA_KEPT, REACH
 from wafer_planner_ros.report import plan_json
 from wafer_planner_ros.service.optima_store import load_optima, optima_path, OptimaError
 from wafer_planner_ros.service.optima_store import save_optima
@@ -126,14 +126,16 @@ def test_the_library_is_stored_and_every_optimum_verified_on_load(planner, optim
     assert path == optima_path(tmp_path, table_key(planner))
     again = Planner(planner.cell, planner.roadmap).with_method(WholeCurve)
     loaded = load_optima(again, tmp_path)
-    assert loaded.kept == len(planner.optima) >= 2 and loaded.rejected == ()
+    assert loaded.kept == len(planner.optima) >= 1 and loaded.rejected == ()
     assert again.optima.nearest(START, GOAL).duration == optimum.cycle_time
 
 
 def test_an_edited_library_file_changes_nothing_but_speed(planner, optimum, tmp_path,
                                                           default_cell):
+    planner.plan('loadport1', 'loadlock2')  # a second optimum, kept
     for kept in planner.optima.entries():  # more optima: the same moves backwards
         planner.optima.add(kept.goal, kept.start, kept.curve.backwards())
+    assert len(planner.optima) >= 4
     path = save_optima(planner, tmp_path)
     document = json.loads(path.read_text())
     count = len(document['optima'])
@@ -155,13 +157,19 @@ def test_an_edited_library_file_changes_nothing_but_speed(planner, optimum, tmp_
     # A request near the optimum whose file entry was edited is still answered, verified.
     answer = again.plan(START + NEAR, GOAL - NEAR, budget=0.12)
     _checked(default_cell, planner.roadmap, answer)
-    # Damage (the digest no longer matches) or another key: the file is passed over whole.
+    # Damage (the digest no longer matches), too many optima or another key: the file is
+    # passed over whole.
     path.write_text(path.read_text().replace('"format": 1', '"format": 1 ', 1)[:-40])
     with pytest.raises(OptimaError, match='unreadable'):
         load_optima(again, tmp_path)
     document['optima'][2]['goal'][0] += 1e-3
     path.write_text(json.dumps(document))
     with pytest.raises(OptimaError, match='does not match its digest'):
+        load_optima(again, tmp_path)
+    many = dict(document, optima=document['optima'] * (OPTIMA_KEPT // count + 1))
+    many['digest'] = content_digest([many['optima']])
+    path.write_text(json.dumps(many))
+    with pytest.raises(OptimaError, match='more than a planner keeps'):
         load_optima(again, tmp_path)
     document['key'] = '0' * 64
     document['digest'] = content_digest([document['optima']])

@@ -11,8 +11,9 @@ Without a file of its own key, the newest file of the same basis is read (the st
 table's ``table_basis``: the same robot, enclosure, settings, limit set and version; another
 roadmap, or a station re-taught): its optima are drafts as good as any, once verified.
 
-Nothing read back is trusted. A file that cannot be read, is for another key or format, or
-whose content does not match its digest is passed over whole (``OptimaError``); every
+Nothing read back is trusted. A file that cannot be read, is for another key or format,
+whose content does not match its digest, or that holds more optima than a planner keeps
+is passed over whole (``OptimaError``); every
 optimum in one that is read is verified in full from its two ends as if just planned
 (``verify``: well formed, at rest exactly on its ends, every limit, the proof and the dense
 collision check), and one that fails, or cannot be read, is left out. And a kept optimum
@@ -30,6 +31,7 @@ import numpy as np
 
 from wafer_planner_ros import __version__
 from wafer_planner_ros.cell.stations import INSIDE
+from wafer_planner_ros.planner.optima import OPTIMA_KEPT
 from wafer_planner_ros.service.table import table_basis, table_key
 from wafer_planner_ros.service.table_entry import entry_curve, MAX_DURATION
 from wafer_planner_ros.service.table_store import content_digest, MAX_DONORS, write_json
@@ -155,6 +157,9 @@ def _read_file(path: Path, key) -> dict:
         raise OptimaError(f'{path} is in optima format {layout}, not {FORMAT}')
     if not isinstance(optima, list) or content_digest([optima]) != digest:
         raise OptimaError(f'{path}: its content does not match its digest')
+    if len(optima) > OPTIMA_KEPT:
+        raise OptimaError(f'{path} holds {len(optima)} optima, more than a planner keeps '
+                          f'({OPTIMA_KEPT})')
     return document
 
 
