@@ -180,22 +180,19 @@ def _donor(planner, cache_dir) -> Optional[Path]:
     return None
 
 
-def learn_table(planner, table) -> int:
+def learn_table(planner, table) -> None:
     """
-    Keep the curves of a station table's station pairs in ``planner.optima``; return how many.
+    Keep the curves of a station table's station pairs in ``planner.optima``.
 
     ``planner``: of the table's limit set. The table's entries are verified (when loaded or
     planned); the moves through the ports are not free moves, and are not kept.
     """
-    kept = 0
     for (start, goal), entry in table.entries.items():
         if INSIDE in start or INSIDE in goal:
             continue
         curve = entry_curve(entry)
         if isinstance(curve, CubicBSpline):
-            kept += planner.optima.add(curve.control_points[0], curve.control_points[-1],
-                                       curve)
-    return kept
+            planner.optima.add(curve.control_points[0], curve.control_points[-1], curve)
 
 
 def _read(stored: dict, joints: int) -> tuple:
