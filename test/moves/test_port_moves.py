@@ -1,6 +1,7 @@
 """Moves from and to inside a port: requested, planned through the channel, checked."""
 
 import copy
+import dataclasses
 from pathlib import Path
 
 from independent import check, port_ratios
@@ -14,6 +15,7 @@ from wafer_planner_ros.moves.timing import profile
 from wafer_planner_ros.planner import candidates, Planner, PlannerSettings
 from wafer_planner_ros.report import plan_json, roadmap_json
 from wafer_planner_ros.roadmap.cache import load_or_build
+from wafer_planner_ros.trajectory import shape as shape_module
 from wafer_planner_ros.trajectory.methods import KnotTiming, WholeCurve
 from wafer_planner_ros.trajectory.tuning import ShapeSettings
 import yaml
@@ -289,25 +291,42 @@ def test_joint_angles_at_a_mouth_are_not_inside_its_port(roadmap_cache):
 
 @pytest.mark.slow
 def test_a_solve_that_fails_to_push_its_start_out_of_a_keep_out_drops_it(
-        default_cell, default_roadmap):
+        default_cell, default_roadmap, monkeypatch):
     """
-    A transfer whose start passes turned near another port's mouth is still optimised.
+    A blend whose first solve fails under the keep-outs is solved under the port rule alone.
 
     The default cell, empty, loadport1:inside -> loadlock2:inside: on the elbow-right
-    branches the transfer between the mouths, planned from rest to rest, passes within the
-    keep-out round another port's mouth, and the blend that had to push it out failed its
-    first solve. That combination was lost, and the move came to 2.785 s where it is
-    2.581 s without keep-outs; such a solve now goes on under the port rule alone.
+    branches the transfer between the mouths passes near another port's mouth, and the
+    blend has to push it out of the keep-out round it. Where that first solve failed, the
+    combination was lost, and the move came to 2.785 s where it is 2.581 s without
+    keep-outs (1.079 times). Whether that solve fails depends on rounding (it did on the
+    machine this was found on, not on another since), so here it is made to fail: each
+    such blend goes on under the port rule alone, and the move keeps the branches and,
+    within what the keep-outs cost elsewhere in it (none and 0.16 % on those two
+    machines), the time of the move planned without keep-outs.
     """
+    real, failed = shape_module._solve, []
+
+    def failing(problem, start, *rest, **options):
+        solved = real(problem, start, *rest, **options)
+        if any(end is not None for end in problem.ends) and start is problem.start \
+                and problem.clearance.model is not problem.model:
+            failed.append(problem)
+            return dataclasses.replace(solved, points=np.full_like(solved.points, np.nan))
+        return solved
+
     def planned(shape):
         planner = Planner(default_cell, default_roadmap,
                           PlannerSettings(method=WholeCurve, shape=shape))
         return planner.plan('loadport1:inside', 'loadlock2:inside', load=EMPTY)
 
-    kept = planned(ShapeSettings())
     plain = planned(ShapeSettings(port_keep_out=0.0))
+    monkeypatch.setattr(shape_module, '_solve', failing)
+    kept = planned(ShapeSettings())
+    assert failed and all(problem.clearance.model is problem.model for problem in failed)
     assert kept.verification.ok and kept.metrics['stops'] == 0
-    assert kept.cycle_time <= 1.001 * plain.cycle_time
+    assert kept.branches == plain.branches
+    assert kept.cycle_time <= 1.01 * plain.cycle_time
 
 
 @pytest.mark.slow
