@@ -77,7 +77,8 @@ bench: kernels
 	$(ENV) $(PY) bench/bench_live.py
 	$(ENV) $(PY) bench/bench_cell.py
 	$(ENV) $(PY) bench/bench_optimiser.py --seeds 1 2 3
-	$(ENV) $(PY) bench/bench_free_moves.py --seeds 1 2 3
+	refs=$$(mktemp -d) && $(ENV) $(PY) bench/bench_free_moves.py --seeds 1 2 3 --references $$refs \
+		&& $(ENV) $(PY) bench/bench_node_free_moves.py --seeds 1 2 3 --references $$refs
 	$(ENV) $(PY) bench/bench_table.py
 	$(ENV) $(PY) bench/bench_cycle.py --seeds 1 2 3
 	$(ENV) $(PY) bench/bench_ports.py

@@ -7,9 +7,10 @@ packaged ``planning.timeout``: how long it takes and how near its answer is to t
 unbudgeted optimum. For each cell and roadmap seed (``free_moves_runner.py``, each run in a
 process of its own): first the references by this checkout (every station pair and
 ``--joints`` random free joint pairs, unbudgeted), then the budgeted answers of this
-checkout and of commit ``--old`` (default 8937658, before the library of optima), one after
-the other, their order alternating from one cell and seed to the next (so that the
-machine's drift falls on both alike): the random joint pairs, then the station pairs asked
+checkout and of commit ``--old`` (default f501ef2: before each sample's clearance was
+computed once for all its rows and a kept optimum moved by time), one after the other,
+their order alternating from one cell and seed to the next (so that the machine's drift
+falls on both alike): the random joint pairs, then the station pairs asked
 as the joint angles of their unbudgeted answers, then joint angles near those (each joint
 of each end moved by up to 0.1 rad: a station re-taught a little, a pose near a station's).
 A version with a library of optima has the station pairs' curves in it first, as the node
@@ -25,7 +26,9 @@ node's own part of a joint answer (the hand-over to its planning process and bac
 measured by ``bench_node.py`` (a few ms). Writes ``results/free_moves.json``.
 
 Run: ``python bench/bench_free_moves.py [--seeds 1 2 3] [--cells default pillar notched]
-[--joints 100] [--old COMMIT]``.
+[--joints 100] [--old COMMIT] [--references DIR]`` (``--references``: a folder that keeps
+the unbudgeted references as ``CELL-SEED-JOINTS.json`` and reuses those it holds, as
+``bench_node_free_moves.py`` does: planned by this checkout, they take most of the run).
 """
 
 import argparse
@@ -44,7 +47,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / 'results' / 'free_moves.json'
-OLD = '8937658'
+OLD = 'f501ef2'
 OPTIMAL_CONTROL = {
     ('loadport1', 'loadlock1'): 1.464, ('loadport1', 'loadlock2'): 2.036,
     ('loadport2', 'loadlock1'): 1.567, ('loadport2', 'loadlock2'): 1.568,
@@ -116,6 +119,7 @@ def main() -> int:
     parser.add_argument('--cells', nargs='+', choices=sorted(CELLS), default=list(CELLS))
     parser.add_argument('--joints', type=int, default=100)
     parser.add_argument('--old', default=OLD)
+    parser.add_argument('--references', help='a folder keeping the unbudgeted references')
     args = parser.parse_args()
     roots = {'new': ROOT, 'old': extracted(args.old)}
     rows = {'new': [], 'old': []}
@@ -129,9 +133,14 @@ def main() -> int:
             run(roots[version], 'budgeted', CELLS['default'], 1, 1, stored)
         for name in args.cells:
             for seed in args.seeds:
-                reference = run(ROOT, 'reference', CELLS[name], seed, args.joints)
-                stored = Path(folder) / f'{name}-{seed}.json'
-                stored.write_text(json.dumps(reference))
+                stored = Path(args.references or folder) / \
+                    f'{name}-{seed}-{args.joints}.json'
+                if stored.exists():
+                    reference = json.loads(stored.read_text())
+                else:
+                    reference = run(ROOT, 'reference', CELLS[name], seed, args.joints)
+                    stored.parent.mkdir(parents=True, exist_ok=True)
+                    stored.write_text(json.dumps(reference))
                 order = ('new', 'old') if turn % 2 == 0 else ('old', 'new')
                 turn += 1
                 for version in order:
