@@ -190,7 +190,7 @@ class ClearanceBound:
 
         By the body Jacobian through the basis weights; from ``row`` on; return the next.
         Each sample's configuration, its derivatives and every body's clearance are
-        computed once, however many of its bodies have rows (three on average): the same
+        computed once, however many of its bodies have rows (about three): the same
         values, in a third of the time.
         """
         spans, fractions, at = _distinct(span, fraction)

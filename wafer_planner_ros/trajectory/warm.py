@@ -11,8 +11,8 @@ knots), through a quintic that leaves the ends at rest (``blend``); the span dur
 kept, then λ-scaled (Eq. 12, ``timing_problem.scaled_start``) so that the start meets
 every limit. By time, not by the points' order: an optimum's spans range from a
 millisecond to tenths of a second, and an offset added in equal steps per point moved the
-points of a millisecond's span as far as those of a long one — speeds and jerks thousands
-of times the limits there, λ-scaled to a draft 2.5 times the optimum's cycle time.
+points of a millisecond's span as far as those of a long one: its jerk 15 times the
+limit there, λ-scaled to a draft 2.5 times the optimum's cycle time.
 It is a draft only: not proven free of collision (its ends moved), it is optimised and
 proven for the request like any start (``methods.WholeCurve``), and never returned as it is.
 """
