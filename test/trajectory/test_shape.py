@@ -307,6 +307,29 @@ def test_a_scan_finds_every_stretch_nearer_a_wall_than_the_samples_keep(
     assert len(shape_module._too_near(free, curve)) == 0
 
 
+def test_a_scan_of_a_curve_lasting_many_minutes_looks_at_a_bounded_number_of_configurations(
+        default_cell, corridor, monkeypatch):
+    """A failed solve's curve of half an hour: scanned as one of 40 s, and its walls found."""
+    curve = corridor.trajectory
+    slow = CubicBSpline.from_intervals(curve.control_points,
+                                       curve.intervals * (1800.0 / curve.duration))
+    problem = ShapeProblem(curve, default_cell, ShapeSettings(clearance=0.05),
+                           TimingSettings())
+    model = problem.model
+    looked = []
+    body_clearance = type(model).body_clearance
+
+    def counted(self, q):
+        looked.append(len(np.atleast_2d(q)))
+        return body_clearance(self, q)
+
+    monkeypatch.setattr(type(model), 'body_clearance', counted)
+    times = shape_module._too_near(problem, slow)
+    assert sum(looked) <= shape_module.SCAN_POINTS
+    assert len(times) and np.all((model.body_clearance(slow.evaluate(times))
+                                  < shape_module._kept(problem)).any(axis=1))
+
+
 def test_an_unproven_start_is_never_returned(default_cell, corridor):
     """A start through a wall: only proven curves come back, or none at all."""
     model = default_cell.motion_model

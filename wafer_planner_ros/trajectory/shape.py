@@ -71,6 +71,12 @@ continues does)."""
 SCAN_STEP = 0.002
 """s: where a curve is not proven, the step at which it is scanned for every stretch nearer
 a wall than its samples keep (``_too_near``)."""
+SCAN_POINTS = 20000
+"""Configurations a scan (``_too_near``) looks at at most: every ``SCAN_STEP`` of a curve of
+up to 40 s (the free moves last seconds), more widely spaced on a longer one. A solve that
+ends far off (its iteration limit, or a failed subproblem) can leave a curve of many minutes,
+under ``FAILED_SLOWER`` times a slow start, which every ``SCAN_STEP`` took seconds to scan,
+past the request's deadline: its samples only place the next round's rows."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -244,11 +250,12 @@ def _too_near(problem: ShapeProblem, curve: CubicBSpline) -> np.ndarray:
     """
     Return the times at which a body or a port margin of ``curve`` is nearer than kept.
 
-    The curve is scanned every ``SCAN_STEP``; of each stretch where a column of the
-    clearance (``_kept``) falls short, its first, nearest and last times.
+    The curve is scanned every ``SCAN_STEP`` (at ``SCAN_POINTS`` at most); of each stretch
+    where a column of the clearance (``_kept``) falls short, its first, nearest and last
+    times.
     """
-    times = np.linspace(0.0, curve.duration,
-                        max(2, int(np.ceil(curve.duration / SCAN_STEP)) + 1))
+    times = np.linspace(0.0, curve.duration, min(
+        max(2, int(np.ceil(curve.duration / SCAN_STEP)) + 1), SCAN_POINTS))
     clearance = problem.model.body_clearance(curve.evaluate(times))
     short = clearance < _kept(problem)
     found = []
