@@ -234,6 +234,9 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
             time.sleep(3 * timeout)
         return answer(service, start, goal, deadline, load)
     monkeypatch.setattr(ProcessService, 'answer', stalled)
+    worker = table_node.node._worker
+    # An earlier test's plans may still run on (their answers went out as TIMEOUT): idle first.
+    wait_for(lambda: not worker._backlog and not worker._lane and not worker._planned, 120.0)
     table_node.node.set_parameters([Parameter('planning.timeout', value=timeout),
                                     Parameter('planning.max_queue', value=3)])
     try:
@@ -245,8 +248,10 @@ def test_every_request_is_answered_by_its_deadline_however_long_its_plan_takes(
             if request_id == ids[0]:
                 # The first taken from the queue (it stalls there) before the others fill
                 # it: under load the worker once took it only after the fourth arrived,
-                # which found the queue full (BUSY).
-                wait_for(lambda: table_node.node._worker._planned, timeout)
+                # which found the queue full (BUSY); and once an earlier test's plan, still
+                # running, stood for it here, with the same outcome. Taken: the queue is
+                # empty and a request is being planned.
+                wait_for(lambda: not worker._backlog and worker._planned, timeout)
         arrived = _arrivals(table_node, ids, 120.0)
         # The three answered TIMEOUT while they waited no longer fill the queue.
         queued = table_node.status()['queue']
